@@ -1,0 +1,602 @@
+//! The silhouette rasterizer: body + pose + camera → binary mask. It is the
+//! tracker's inner loop (thousands of calls per frame), so:
+//!
+//! - each part is visited only inside its projected bounding box;
+//! - a pixel is inside a part when the ray through its centre meets the part. For a
+//!   quadric the ray test's discriminant is a quadratic in the pixel's column, so for
+//!   every row the exact span of an ellipsoid (and of a cylinder's infinite hull) comes
+//!   from one quadratic equation; only a cylinder's two span ends need per-pixel tests
+//!   against its caps;
+//! - spans are written into a bit-packed [`Mask`] (one bit a pixel, rows of u64
+//!   words), so filling, counting and XOR-ing work on 64 pixels at a time;
+//! - nothing is allocated per call.
+//!
+//! Parts that reach behind the camera's near plane are not drawn (a pose that puts
+//! the body behind the camera has nothing sensible to show).
+
+use image::GrayImage;
+use nalgebra::{IsometryMatrix3, Matrix3, Point3, Vector3};
+
+use super::camera::Camera;
+use super::parts::{Kind, Part};
+use super::skeleton::{Posed, LANDMARK_COUNT};
+use super::Body;
+
+/// A binary image, one bit per pixel, each row padded to whole u64 words.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Mask {
+    width: u32,
+    height: u32,
+    stride: usize,
+    words: Vec<u64>,
+}
+
+impl Mask {
+    pub fn new(width: u32, height: u32) -> Mask {
+        let stride = (width as usize).div_ceil(64);
+        Mask {
+            width,
+            height,
+            stride,
+            words: vec![0; stride * height as usize],
+        }
+    }
+
+    pub fn width(&self) -> u32 {
+        self.width
+    }
+
+    pub fn height(&self) -> u32 {
+        self.height
+    }
+
+    /// Words per row.
+    pub fn stride(&self) -> usize {
+        self.stride
+    }
+
+    pub fn words(&self) -> &[u64] {
+        &self.words
+    }
+
+    pub fn row(&self, y: u32) -> &[u64] {
+        let s = y as usize * self.stride;
+        &self.words[s..s + self.stride]
+    }
+
+    pub fn clear(&mut self) {
+        self.words.fill(0);
+    }
+
+    pub fn get(&self, x: u32, y: u32) -> bool {
+        let w = self.words[y as usize * self.stride + (x as usize >> 6)];
+        (w >> (x & 63)) & 1 == 1
+    }
+
+    pub fn set(&mut self, x: u32, y: u32, on: bool) {
+        let w = &mut self.words[y as usize * self.stride + (x as usize >> 6)];
+        if on {
+            *w |= 1 << (x & 63);
+        } else {
+            *w &= !(1 << (x & 63));
+        }
+    }
+
+    /// Sets pixels x0..=x1 of row y (both within the image, x0 ≤ x1).
+    pub fn fill_span(&mut self, y: u32, x0: u32, x1: u32) {
+        debug_assert!(x0 <= x1 && x1 < self.width && y < self.height);
+        let base = y as usize * self.stride;
+        let (w0, w1) = (x0 as usize >> 6, x1 as usize >> 6);
+        let lo = !0u64 << (x0 & 63);
+        let hi = !0u64 >> (63 - (x1 & 63));
+        if w0 == w1 {
+            self.words[base + w0] |= lo & hi;
+        } else {
+            self.words[base + w0] |= lo;
+            for w in &mut self.words[base + w0 + 1..base + w1] {
+                *w = !0;
+            }
+            self.words[base + w1] |= hi;
+        }
+    }
+
+    /// Number of set pixels.
+    pub fn count(&self) -> u64 {
+        self.words.iter().map(|w| w.count_ones() as u64).sum()
+    }
+
+    fn same_size(&self, other: &Mask) {
+        assert!(
+            self.width == other.width && self.height == other.height,
+            "masks of different sizes"
+        );
+    }
+
+    /// Pixels set in both.
+    pub fn and_count(&self, other: &Mask) -> u64 {
+        self.same_size(other);
+        let it = self.words.iter().zip(&other.words);
+        it.map(|(a, b)| (a & b).count_ones() as u64).sum()
+    }
+
+    /// Pixels set in exactly one (the plain XOR cost, Eq. 2).
+    pub fn xor_count(&self, other: &Mask) -> u64 {
+        self.same_size(other);
+        let it = self.words.iter().zip(&other.words);
+        it.map(|(a, b)| (a ^ b).count_ones() as u64).sum()
+    }
+
+    /// Intersection over union (1 when both are empty).
+    pub fn iou(&self, other: &Mask) -> f64 {
+        let inter = self.and_count(other);
+        let union = self.count() + other.count() - inter;
+        if union == 0 {
+            1.0
+        } else {
+            inter as f64 / union as f64
+        }
+    }
+
+    /// An 8-bit image, 255 where set and 0 elsewhere.
+    pub fn to_gray(&self) -> GrayImage {
+        GrayImage::from_fn(self.width, self.height, |x, y| {
+            image::Luma([if self.get(x, y) { 255 } else { 0 }])
+        })
+    }
+
+    /// Set where the image is at least `threshold`.
+    pub fn from_gray(img: &GrayImage, threshold: u8) -> Mask {
+        let mut m = Mask::new(img.width(), img.height());
+        for (x, y, p) in img.enumerate_pixels() {
+            if p.0[0] >= threshold {
+                m.set(x, y, true);
+            }
+        }
+        m
+    }
+}
+
+/// One part, ready to rasterize: the ray through pixel (u, v) in the part's
+/// canonical space is `o + t·(g + u·p + v·q)`, where t is the depth in cm.
+#[derive(Clone, Copy, Debug)]
+struct Prepared {
+    kind: Kind,
+    o: Vector3<f64>,
+    g: Vector3<f64>,
+    p: Vector3<f64>,
+    q: Vector3<f64>,
+    /// Inclusive pixel bounds of the projected bounding box, clipped to the image.
+    x0: i64,
+    x1: i64,
+    y0: i64,
+    y1: i64,
+    /// Canonical normal → camera normal (unnormalised): R · A⁻¹.
+    normal: Matrix3<f64>,
+}
+
+impl Prepared {
+    /// None when the part is off-screen or crosses the near plane.
+    fn new(part: &Part, joint_to_camera: &IsometryMatrix3<f64>, cam: &Camera) -> Option<Prepared> {
+        let rot = joint_to_camera.rotation.matrix();
+        let inv_a = Vector3::new(1.0 / part.radii.x, 1.0 / part.radii.y, 1.0 / part.radii.z);
+        // Conservative screen bounds from the corners of the canonical bounding box.
+        let (ylo, yhi) = match part.kind {
+            Kind::Ellipsoid => (-1.0, 1.0),
+            Kind::Cylinder => (0.0, 1.0),
+        };
+        let (mut umin, mut umax, mut vmin, mut vmax) = (f64::MAX, f64::MIN, f64::MAX, f64::MIN);
+        for corner in 0..8 {
+            let qc = Vector3::new(
+                if corner & 1 == 0 { -1.0 } else { 1.0 },
+                if corner & 2 == 0 { ylo } else { yhi },
+                if corner & 4 == 0 { -1.0 } else { 1.0 },
+            );
+            let local = part.center + part.radii.component_mul(&qc);
+            let c = joint_to_camera * Point3::from(local);
+            let [u, v] = cam.project_camera(&c)?;
+            umin = umin.min(u);
+            umax = umax.max(u);
+            vmin = vmin.min(v);
+            vmax = vmax.max(v);
+        }
+        let x0 = ((umin - 0.5).ceil() as i64).max(0);
+        let x1 = ((umax - 0.5).floor() as i64).min(cam.width as i64 - 1);
+        let y0 = ((vmin - 0.5).ceil() as i64).max(0);
+        let y1 = ((vmax - 0.5).floor() as i64).min(cam.height as i64 - 1);
+        if x0 > x1 || y0 > y1 {
+            return None;
+        }
+        // Camera → canonical: q = A⁻¹ (Rᵀ (x − t) − c).
+        let rt = rot.transpose();
+        let m = Matrix3::from_diagonal(&inv_a) * rt;
+        let o = inv_a.component_mul(&(rt * (-joint_to_camera.translation.vector) - part.center));
+        // Camera ray direction through pixel (u, v): ((u − cx)/fx, −(v − cy)/fy, −1).
+        let d00 = Vector3::new(-cam.cx / cam.fx, cam.cy / cam.fy, -1.0);
+        Some(Prepared {
+            kind: part.kind,
+            o,
+            g: m * d00,
+            p: m.column(0) / cam.fx,
+            q: -m.column(1) / cam.fy,
+            x0,
+            x1,
+            y0,
+            y1,
+            normal: rot * Matrix3::from_diagonal(&inv_a),
+        })
+    }
+
+    /// The direction of the row's ray at u = 0; the ray at u is `r + u·p`.
+    fn row_base(&self, v: f64) -> Vector3<f64> {
+        self.g + v * self.q
+    }
+
+    /// Coefficients (A, B, C) of the discriminant A·u² + B·u + C of the ray test along
+    /// a row: the whole solid for an ellipsoid, the infinite side surface for a cylinder.
+    fn row_quadratic(&self, r: &Vector3<f64>) -> (f64, f64, f64) {
+        let (o, p) = (&self.o, &self.p);
+        let (or, op, rr, rp, pp, k) = match self.kind {
+            Kind::Ellipsoid => (
+                o.dot(r),
+                o.dot(p),
+                r.dot(r),
+                r.dot(p),
+                p.dot(p),
+                o.dot(o) - 1.0,
+            ),
+            Kind::Cylinder => (
+                o.x * r.x + o.z * r.z,
+                o.x * p.x + o.z * p.z,
+                r.x * r.x + r.z * r.z,
+                r.x * p.x + r.z * p.z,
+                p.x * p.x + p.z * p.z,
+                o.x * o.x + o.z * o.z - 1.0,
+            ),
+        };
+        (op * op - k * pp, 2.0 * (or * op - k * rp), or * or - k * rr)
+    }
+
+    /// The inclusive pixel span of a row where the quadratic's test passes, clipped
+    /// to the bounding box.
+    fn row_span(&self, r: &Vector3<f64>) -> Option<(i64, i64)> {
+        let (a, b, c) = self.row_quadratic(r);
+        let (lo, hi) = if a < -1e-18 {
+            let disc = b * b - 4.0 * a * c;
+            if disc < 0.0 {
+                return None;
+            }
+            let s = disc.sqrt();
+            // Stable roots of a·u² + b·u + c; a < 0, so the test passes between them.
+            let qq = -0.5 * (b + b.signum() * s);
+            let (r1, r2) = if qq != 0.0 {
+                (qq / a, c / qq)
+            } else {
+                (0.0, 0.0)
+            };
+            (r1.min(r2), r1.max(r2))
+        } else {
+            // Degenerate (the camera sits inside a cylinder's infinite hull, or the
+            // conic is not an ellipse): test every pixel of the box.
+            (f64::NEG_INFINITY, f64::INFINITY)
+        };
+        let x0 = if lo.is_finite() {
+            ((lo - 0.5).ceil() as i64).max(self.x0)
+        } else {
+            self.x0
+        };
+        let x1 = if hi.is_finite() {
+            ((hi - 0.5).floor() as i64).min(self.x1)
+        } else {
+            self.x1
+        };
+        (x0 <= x1).then_some((x0, x1))
+    }
+
+    /// The exact ray test for the pixel whose ray direction is `d`.
+    fn hits(&self, d: &Vector3<f64>) -> bool {
+        let o = &self.o;
+        match self.kind {
+            Kind::Ellipsoid => {
+                let od = o.dot(d);
+                od < 0.0 && od * od - d.dot(d) * (o.dot(o) - 1.0) >= 0.0
+            }
+            Kind::Cylinder => cylinder_interval(o, d).is_some(),
+        }
+    }
+
+    /// Depth (cm) and canonical normal where the ray `d` enters the part.
+    fn entry(&self, d: &Vector3<f64>) -> Option<(f64, Vector3<f64>)> {
+        let o = &self.o;
+        match self.kind {
+            Kind::Ellipsoid => {
+                let (od, dd) = (o.dot(d), d.dot(d));
+                let disc = od * od - dd * (o.dot(o) - 1.0);
+                if od >= 0.0 || disc < 0.0 {
+                    return None;
+                }
+                let t = (-od - disc.sqrt()) / dd;
+                Some((t, o + t * d))
+            }
+            Kind::Cylinder => {
+                let (t0, _) = cylinder_interval(o, d)?;
+                let side = o + t0 * d;
+                if (0.0..=1.0).contains(&side.y) {
+                    return Some((t0, Vector3::new(side.x, 0.0, side.z)));
+                }
+                // Entered through a cap.
+                let cap = if side.y < 0.0 { 0.0 } else { 1.0 };
+                let t = (cap - o.y) / d.y;
+                Some((
+                    t,
+                    Vector3::new(0.0, if cap == 0.0 { -1.0 } else { 1.0 }, 0.0),
+                ))
+            }
+        }
+    }
+}
+
+/// For the unit cylinder x² + z² ≤ 1, 0 ≤ y ≤ 1 and the line o + t·d: the range of t
+/// inside the infinite cylinder, when the line meets the finite one.
+fn cylinder_interval(o: &Vector3<f64>, d: &Vector3<f64>) -> Option<(f64, f64)> {
+    let a = d.x * d.x + d.z * d.z;
+    let b = o.x * d.x + o.z * d.z;
+    let c = o.x * o.x + o.z * o.z - 1.0;
+    if a < 1e-18 {
+        // Along the axis: inside the tube or not at all.
+        if c > 0.0 || d.y.abs() < 1e-18 {
+            return None;
+        }
+        let (ta, tb) = ((0.0 - o.y) / d.y, (1.0 - o.y) / d.y);
+        return Some((ta.min(tb), ta.max(tb)));
+    }
+    let disc = b * b - a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let s = disc.sqrt();
+    let (t0, t1) = ((-b - s) / a, (-b + s) / a);
+    let (y0, y1) = (o.y + t0 * d.y, o.y + t1 * d.y);
+    if y0.max(y1) < 0.0 || y0.min(y1) > 1.0 {
+        return None;
+    }
+    // Clip the interval to the slab 0 ≤ y ≤ 1.
+    let (mut lo, mut hi) = (t0, t1);
+    if d.y.abs() > 1e-18 {
+        let (ta, tb) = ((0.0 - o.y) / d.y, (1.0 - o.y) / d.y);
+        lo = lo.max(ta.min(tb));
+        hi = hi.min(ta.max(tb));
+    }
+    Some((lo, hi))
+}
+
+/// Draws the silhouette of `body` in pose `posed` seen by `cam` into `mask` (which is
+/// cleared first and must have the camera's size). Allocation-free.
+pub fn render_mask(body: &Body, posed: &Posed, cam: &Camera, mask: &mut Mask) {
+    assert!(
+        mask.width == cam.width && mask.height == cam.height,
+        "mask size differs from the camera's"
+    );
+    mask.clear();
+    for part in &body.parts {
+        let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+        if let Some(prep) = Prepared::new(part, &to_cam, cam) {
+            draw_part(&prep, mask);
+        }
+    }
+}
+
+fn draw_part(prep: &Prepared, mask: &mut Mask) {
+    for y in prep.y0..=prep.y1 {
+        let r = prep.row_base(y as f64 + 0.5);
+        let Some((mut x0, mut x1)) = prep.row_span(&r) else {
+            continue;
+        };
+        if prep.kind == Kind::Cylinder {
+            // The finite cylinder's span is an interval inside the hull's: trim the
+            // ends that miss the caps.
+            let dir = |x: i64| r + (x as f64 + 0.5) * prep.p;
+            while x0 <= x1 && !prep.hits(&dir(x0)) {
+                x0 += 1;
+            }
+            while x1 >= x0 && !prep.hits(&dir(x1)) {
+                x1 -= 1;
+            }
+            if x0 > x1 {
+                continue;
+            }
+        }
+        mask.fill_span(y as u32, x0 as u32, x1 as u32);
+    }
+}
+
+/// Fraction of each pixel covered by the body, from `k × k` ray samples per pixel,
+/// each tested directly (no spans): the accuracy reference for [`render_mask`].
+pub fn render_coverage(body: &Body, posed: &Posed, cam: &Camera, k: u32) -> Vec<f32> {
+    let (w, h) = (cam.width as usize, cam.height as usize);
+    let preps: Vec<Prepared> = body
+        .parts
+        .iter()
+        .filter_map(|part| {
+            let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+            Prepared::new(part, &to_cam, cam)
+        })
+        .collect();
+    let mut out = vec![0f32; w * h];
+    let step = 1.0 / k as f64;
+    for (y, row) in out.chunks_mut(w).enumerate() {
+        for (x, cov) in row.iter_mut().enumerate() {
+            let mut n = 0;
+            for sy in 0..k {
+                for sx in 0..k {
+                    let u = x as f64 + (sx as f64 + 0.5) * step;
+                    let v = y as f64 + (sy as f64 + 0.5) * step;
+                    let d = |p: &Prepared| p.g + u * p.p + v * p.q;
+                    // A sample inside the box of a part that lies partly outside the
+                    // box's pixel bounds would be missed by the fast path too, so the
+                    // reference tests every part over the whole image.
+                    if preps.iter().any(|p| p.hits(&d(p))) {
+                        n += 1;
+                    }
+                }
+            }
+            *cov = n as f32 / (k * k) as f32;
+        }
+    }
+    out
+}
+
+/// Per-pixel result of a shaded render: the nearest part and its surface normal.
+#[derive(Clone, Debug)]
+pub struct Fragments {
+    pub width: u32,
+    pub height: u32,
+    /// Depth (cm) of the nearest surface, +∞ where no part is seen.
+    pub depth: Vec<f32>,
+    /// Index into `body.parts` of the nearest part (meaningless where depth is ∞).
+    pub part: Vec<u8>,
+    /// Unit normal of the nearest surface in the internal camera frame.
+    pub normal: Vec<[f32; 3]>,
+}
+
+impl Fragments {
+    pub fn new(width: u32, height: u32) -> Fragments {
+        let n = width as usize * height as usize;
+        Fragments {
+            width,
+            height,
+            depth: vec![f32::INFINITY; n],
+            part: vec![0; n],
+            normal: vec![[0.0; 3]; n],
+        }
+    }
+}
+
+/// Depth-tested render of the visible surface (for colour clips and previews).
+pub fn render_fragments(body: &Body, posed: &Posed, cam: &Camera, out: &mut Fragments) {
+    assert!(out.width == cam.width && out.height == cam.height);
+    out.depth.fill(f32::INFINITY);
+    for (pi, part) in body.parts.iter().enumerate() {
+        let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+        let Some(prep) = Prepared::new(part, &to_cam, cam) else {
+            continue;
+        };
+        for y in prep.y0..=prep.y1 {
+            let r = prep.row_base(y as f64 + 0.5);
+            let Some((x0, x1)) = prep.row_span(&r) else {
+                continue;
+            };
+            for x in x0..=x1 {
+                let d = r + (x as f64 + 0.5) * prep.p;
+                let Some((t, n)) = prep.entry(&d) else {
+                    continue;
+                };
+                let i = y as usize * cam.width as usize + x as usize;
+                if (t as f32) < out.depth[i] {
+                    out.depth[i] = t as f32;
+                    out.part[i] = pi as u8;
+                    let n = (prep.normal * n).normalize();
+                    out.normal[i] = [n.x as f32, n.y as f32, n.z as f32];
+                }
+            }
+        }
+    }
+}
+
+/// Pixel positions of the 18 joints and 5 tips (None behind the camera).
+pub fn project_landmarks(posed: &Posed, cam: &Camera) -> [Option<[f64; 2]>; LANDMARK_COUNT] {
+    let pts = posed.landmarks();
+    let mut out = [None; LANDMARK_COUNT];
+    for (o, p) in out.iter_mut().zip(pts.iter()) {
+        *o = cam.project(p);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::params::{self, STANDARD_SHAPE};
+    use crate::body::parts::Material;
+    use crate::body::skeleton::Joint;
+    use nalgebra::{Translation3, Vector3};
+
+    #[test]
+    fn fill_span_sets_exactly_the_span() {
+        let mut m = Mask::new(200, 3);
+        m.fill_span(1, 3, 130);
+        assert_eq!(m.count(), 128);
+        assert!(!m.get(2, 1) && m.get(3, 1) && m.get(130, 1) && !m.get(131, 1));
+        m.fill_span(2, 64, 64);
+        assert!(m.get(64, 2) && m.count() == 129);
+        m.fill_span(0, 0, 199);
+        assert_eq!(m.count(), 329);
+        let g = m.to_gray();
+        assert_eq!(Mask::from_gray(&g, 128), m);
+    }
+
+    /// A body of one sphere, to check the projection against a closed form.
+    fn one_sphere(radius: f64) -> Body {
+        let mut body = Body::new(&STANDARD_SHAPE);
+        let sphere = Part {
+            name: "ball",
+            joint: Joint::Hips,
+            kind: Kind::Ellipsoid,
+            center: Vector3::zeros(),
+            radii: Vector3::new(radius, radius, radius),
+            material: Material::Skin,
+        };
+        body.parts = [sphere; crate::body::parts::PART_COUNT];
+        body
+    }
+
+    #[test]
+    fn sphere_on_axis_covers_the_closed_form_disc() {
+        // A sphere of radius r at distance D on the optical axis projects to a disc of
+        // radius f·r/√(D² − r²).
+        let cam = Camera::new(640, 480, 50.0);
+        let (r, dist) = (40.0, 500.0);
+        let body = one_sphere(r);
+        let mut pose = params::rest_pose();
+        pose[0..3].copy_from_slice(&[0.0, 0.0, -dist]);
+        let posed = body.skeleton.posed(&pose);
+        let mut mask = Mask::new(640, 480);
+        render_mask(&body, &posed, &cam, &mut mask);
+        let rad = cam.fx * r / (dist * dist - r * r).sqrt();
+        let expected = std::f64::consts::PI * rad * rad;
+        let got = mask.count() as f64;
+        assert!(
+            (got - expected).abs() / expected < 0.005,
+            "{got} vs {expected}"
+        );
+        // Symmetric about the principal point.
+        assert!(mask.get(320, 240) && mask.get(319, 239));
+        assert!(!mask.get(320 + rad as u32 + 2, 240));
+    }
+
+    #[test]
+    fn fast_render_matches_direct_ray_tests_per_pixel() {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = params::rest_pose();
+        pose[params::ix::ROOT_TZ] = -400.0;
+        pose[params::ix::ROOT_TY] = -10.0;
+        pose[params::ix::ROOT_RY] = 35.0;
+        pose[params::ix::L_SHOULDER + 1] = 80.0;
+        pose[params::ix::R_ELBOW] = 100.0;
+        pose[params::ix::L_KNEE] = 60.0;
+        let posed = body.skeleton.posed(&pose);
+        let cam = Camera::new(160, 120, 55.0).with_pose(IsometryMatrix3::from_parts(
+            Translation3::new(0.0, 0.0, 0.0),
+            nalgebra::Rotation3::identity(),
+        ));
+        let mut mask = Mask::new(160, 120);
+        render_mask(&body, &posed, &cam, &mut mask);
+        let cov = render_coverage(&body, &posed, &cam, 1);
+        for y in 0..120 {
+            for x in 0..160 {
+                let direct = cov[y * 160 + x] > 0.5;
+                assert_eq!(mask.get(x as u32, y as u32), direct, "pixel {x},{y}");
+            }
+        }
+        assert!(mask.count() > 500);
+    }
+}

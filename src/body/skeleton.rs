@@ -1,0 +1,456 @@
+//! The monocap skeleton: 18 named joints, the standard body's bone offsets scaled
+//! by the shape α, and forward kinematics of a motion vector β.
+//!
+//! World frame: right-handed, Y up, centimetres. The rest pose (β = 0 but for the
+//! hip height) stands on y = 0, faces +Z, arms hanging at its sides.
+
+use nalgebra::{IsometryMatrix3, Matrix3, Point3, Rotation3, Translation3, Vector3};
+
+use super::params::{self, ix, sx, Axis, Pose, ShapeValues, MOTION};
+
+/// The 18 joints reported to users (method.md §2), in the order of the motion JSON.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[repr(usize)]
+pub enum Joint {
+    Hips,
+    Spine,
+    Neck,
+    Head,
+    LeftArm,
+    LeftForeArm,
+    LeftHand,
+    RightArm,
+    RightForeArm,
+    RightHand,
+    LeftUpLeg,
+    LeftLeg,
+    LeftFoot,
+    LeftToeBase,
+    RightUpLeg,
+    RightLeg,
+    RightFoot,
+    RightToeBase,
+}
+
+pub const JOINT_COUNT: usize = 18;
+
+impl Joint {
+    pub const ALL: [Joint; JOINT_COUNT] = [
+        Joint::Hips,
+        Joint::Spine,
+        Joint::Neck,
+        Joint::Head,
+        Joint::LeftArm,
+        Joint::LeftForeArm,
+        Joint::LeftHand,
+        Joint::RightArm,
+        Joint::RightForeArm,
+        Joint::RightHand,
+        Joint::LeftUpLeg,
+        Joint::LeftLeg,
+        Joint::LeftFoot,
+        Joint::LeftToeBase,
+        Joint::RightUpLeg,
+        Joint::RightLeg,
+        Joint::RightFoot,
+        Joint::RightToeBase,
+    ];
+
+    pub fn index(self) -> usize {
+        self as usize
+    }
+
+    pub fn name(self) -> &'static str {
+        JOINT_NAMES[self as usize]
+    }
+
+    pub fn parent(self) -> Option<Joint> {
+        use Joint::*;
+        Some(match self {
+            Hips => return None,
+            Spine | LeftUpLeg | RightUpLeg => Hips,
+            Neck | LeftArm | RightArm => Spine,
+            Head => Neck,
+            LeftForeArm => LeftArm,
+            LeftHand => LeftForeArm,
+            RightForeArm => RightArm,
+            RightHand => RightForeArm,
+            LeftLeg => LeftUpLeg,
+            LeftFoot => LeftLeg,
+            LeftToeBase => LeftFoot,
+            RightLeg => RightUpLeg,
+            RightFoot => RightLeg,
+            RightToeBase => RightFoot,
+        })
+    }
+
+    /// The degrees of freedom this joint's rotation takes from β.
+    pub fn dof(self) -> Dof {
+        use Joint::*;
+        match self {
+            Hips => Dof::Root,
+            Spine => Dof::Three(ix::SPINE),
+            Neck => Dof::Three(ix::NECK),
+            LeftArm => Dof::Three(ix::L_SHOULDER),
+            RightArm => Dof::Three(ix::R_SHOULDER),
+            LeftUpLeg => Dof::Three(ix::L_HIP),
+            RightUpLeg => Dof::Three(ix::R_HIP),
+            LeftForeArm => Dof::One(ix::L_ELBOW),
+            RightForeArm => Dof::One(ix::R_ELBOW),
+            LeftLeg => Dof::One(ix::L_KNEE),
+            RightLeg => Dof::One(ix::R_KNEE),
+            LeftFoot => Dof::One(ix::L_ANKLE),
+            RightFoot => Dof::One(ix::R_ANKLE),
+            Head | LeftHand | RightHand | LeftToeBase | RightToeBase => Dof::Fixed,
+        }
+    }
+}
+
+pub const JOINT_NAMES: [&str; JOINT_COUNT] = [
+    "Hips",
+    "Spine",
+    "Neck",
+    "Head",
+    "LeftArm",
+    "LeftForeArm",
+    "LeftHand",
+    "RightArm",
+    "RightForeArm",
+    "RightHand",
+    "LeftUpLeg",
+    "LeftLeg",
+    "LeftFoot",
+    "LeftToeBase",
+    "RightUpLeg",
+    "RightLeg",
+    "RightFoot",
+    "RightToeBase",
+];
+
+/// How β rotates a joint.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Dof {
+    /// Root: translation β[0..3], rotation `Ry(β4) · Rx(β3) · Rz(β5)`.
+    Root,
+    /// Three angles starting at this index, in the table's order x, z, y; the
+    /// rotation is `Rz · Rx · Ry` with each parameter's sign applied.
+    Three(usize),
+    /// One angle about the parameter's axis.
+    One(usize),
+    Fixed,
+}
+
+/// Extremity points (End Sites): the tips the tracker's extremity term pulls on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Tip {
+    HeadTop,
+    LeftHandTip,
+    RightHandTip,
+    LeftToeTip,
+    RightToeTip,
+}
+
+pub const TIP_COUNT: usize = 5;
+
+impl Tip {
+    pub const ALL: [Tip; TIP_COUNT] = [
+        Tip::HeadTop,
+        Tip::LeftHandTip,
+        Tip::RightHandTip,
+        Tip::LeftToeTip,
+        Tip::RightToeTip,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Tip::HeadTop => "HeadTop",
+            Tip::LeftHandTip => "LeftHandTip",
+            Tip::RightHandTip => "RightHandTip",
+            Tip::LeftToeTip => "LeftToeTip",
+            Tip::RightToeTip => "RightToeTip",
+        }
+    }
+
+    /// The joint whose End Site this tip is.
+    pub fn joint(self) -> Joint {
+        match self {
+            Tip::HeadTop => Joint::Head,
+            Tip::LeftHandTip => Joint::LeftHand,
+            Tip::RightHandTip => Joint::RightHand,
+            Tip::LeftToeTip => Joint::LeftToeBase,
+            Tip::RightToeTip => Joint::RightToeBase,
+        }
+    }
+}
+
+/// Landmarks: the 18 joints followed by the 5 tips.
+pub const LANDMARK_COUNT: usize = JOINT_COUNT + TIP_COUNT;
+
+/// Standard body dimensions in cm (about 175 cm tall standing).
+pub mod standard {
+    /// Hip joints below the Hips root.
+    pub const HIP_DROP: f64 = 6.0;
+    /// Half the distance between the hip joints.
+    pub const HIP_HALF_WIDTH: f64 = 9.0;
+    pub const THIGH: f64 = 42.0;
+    pub const SHIN: f64 = 41.0;
+    /// Ankle joint above the sole.
+    pub const ANKLE_HEIGHT: f64 = 8.0;
+    /// Ankle to the ball of the foot (forwards) and its drop.
+    pub const TOE_FORWARD: f64 = 13.0;
+    pub const TOE_DROP: f64 = 6.0;
+    /// Ball of the foot to the toe tip.
+    pub const TOE_TIP: f64 = 7.0;
+    /// Hips root to the Spine joint (lower back).
+    pub const LOWER_BACK: f64 = 10.0;
+    /// Spine joint to the base of the neck.
+    pub const TORSO: f64 = 39.0;
+    /// Spine joint to the shoulder joints (height) and their half spacing.
+    pub const SHOULDER_HEIGHT: f64 = 35.0;
+    pub const SHOULDER_HALF_WIDTH: f64 = 17.5;
+    /// Neck base to the Head joint (skull base).
+    pub const NECK: f64 = 9.0;
+    /// Head joint to the top of the head.
+    pub const HEAD: f64 = 21.0;
+    pub const UPPER_ARM: f64 = 29.0;
+    pub const FOREARM: f64 = 25.0;
+    pub const HAND: f64 = 18.0;
+}
+
+/// Height of the Hips root above the ground in the standard rest pose.
+pub const STANDARD_HIP_HEIGHT: f64 =
+    standard::HIP_DROP + standard::THIGH + standard::SHIN + standard::ANKLE_HEIGHT;
+
+/// A body of a given shape: bone offsets fixed, ready to pose.
+#[derive(Clone, Debug)]
+pub struct Skeleton {
+    pub shape: ShapeValues,
+    /// Offset of each joint from its parent, in the parent's frame (cm).
+    pub offsets: [Vector3<f64>; JOINT_COUNT],
+    /// Offset of each tip from its joint, in the joint's frame (cm).
+    pub tip_offsets: [Vector3<f64>; TIP_COUNT],
+}
+
+impl Skeleton {
+    pub fn new(shape: &ShapeValues) -> Skeleton {
+        use standard as s;
+        let a = |i: usize| shape[i];
+        let th = a(sx::TORSO_HEIGHT);
+        let mut offsets = [Vector3::zeros(); JOINT_COUNT];
+        let mut set = |j: Joint, x: f64, y: f64, z: f64| offsets[j.index()] = Vector3::new(x, y, z);
+        let hip_x = s::HIP_HALF_WIDTH * a(sx::PELVIS_WIDTH);
+        let sh_x = s::SHOULDER_HALF_WIDTH * a(sx::TORSO_WIDTH);
+        set(Joint::Spine, 0.0, s::LOWER_BACK * th, 0.0);
+        set(Joint::Neck, 0.0, s::TORSO * th, 0.0);
+        set(Joint::Head, 0.0, s::NECK * th, 0.0);
+        for (side, arm, fore, hand) in [
+            (1.0, Joint::LeftArm, Joint::LeftForeArm, Joint::LeftHand),
+            (-1.0, Joint::RightArm, Joint::RightForeArm, Joint::RightHand),
+        ] {
+            set(arm, side * sh_x, s::SHOULDER_HEIGHT * th, 0.0);
+            set(fore, 0.0, -s::UPPER_ARM * a(sx::UPPER_ARM), 0.0);
+            set(hand, 0.0, -s::FOREARM * a(sx::FOREARM), 0.0);
+        }
+        for (side, up, leg, foot, toe) in [
+            (
+                1.0,
+                Joint::LeftUpLeg,
+                Joint::LeftLeg,
+                Joint::LeftFoot,
+                Joint::LeftToeBase,
+            ),
+            (
+                -1.0,
+                Joint::RightUpLeg,
+                Joint::RightLeg,
+                Joint::RightFoot,
+                Joint::RightToeBase,
+            ),
+        ] {
+            set(up, side * hip_x, -s::HIP_DROP, 0.0);
+            set(leg, 0.0, -s::THIGH * a(sx::THIGH), 0.0);
+            set(foot, 0.0, -s::SHIN * a(sx::SHIN), 0.0);
+            set(toe, 0.0, -s::TOE_DROP, s::TOE_FORWARD * a(sx::FOOT));
+        }
+        let fa = a(sx::FOREARM);
+        let tip_offsets = [
+            Vector3::new(0.0, s::HEAD * a(sx::HEAD), 0.0),
+            Vector3::new(0.0, -s::HAND * fa, 0.0),
+            Vector3::new(0.0, -s::HAND * fa, 0.0),
+            Vector3::new(0.0, 0.0, s::TOE_TIP * a(sx::FOOT)),
+            Vector3::new(0.0, 0.0, s::TOE_TIP * a(sx::FOOT)),
+        ];
+        Skeleton {
+            shape: *shape,
+            offsets,
+            tip_offsets,
+        }
+    }
+
+    /// Forward kinematics: the world frame of every joint for pose β.
+    pub fn pose(&self, pose: &Pose, out: &mut Posed) {
+        for j in Joint::ALL {
+            let local = match j.dof() {
+                Dof::Root => IsometryMatrix3::from_parts(
+                    Translation3::new(pose[ix::ROOT_TX], pose[ix::ROOT_TY], pose[ix::ROOT_TZ]),
+                    root_rotation(pose),
+                ),
+                dof => IsometryMatrix3::from_parts(
+                    Translation3::from(self.offsets[j.index()]),
+                    joint_rotation(dof, pose),
+                ),
+            };
+            out.joints[j.index()] = match j.parent() {
+                Some(p) => out.joints[p.index()] * local,
+                None => local,
+            };
+        }
+        for (i, t) in Tip::ALL.iter().enumerate() {
+            out.tips[i] = out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]);
+        }
+    }
+
+    /// Convenience: a freshly allocated [`Posed`].
+    pub fn posed(&self, pose: &Pose) -> Posed {
+        let mut out = Posed::default();
+        self.pose(pose, &mut out);
+        out
+    }
+}
+
+/// The root's rotation: heading (Y) outermost, then pitch (X), then roll (Z).
+pub fn root_rotation(pose: &Pose) -> Rotation3<f64> {
+    axis_rotation(Axis::Y, pose[ix::ROOT_RY])
+        * axis_rotation(Axis::X, pose[ix::ROOT_RX])
+        * axis_rotation(Axis::Z, pose[ix::ROOT_RZ])
+}
+
+/// A non-root joint's rotation in its parent's frame.
+pub fn joint_rotation(dof: Dof, pose: &Pose) -> Rotation3<f64> {
+    let signed = |i: usize| MOTION[i].sign * pose[i];
+    match dof {
+        Dof::Three(i) => {
+            axis_rotation(Axis::Z, signed(i + 1))
+                * axis_rotation(Axis::X, signed(i))
+                * axis_rotation(Axis::Y, signed(i + 2))
+        }
+        Dof::One(i) => axis_rotation(MOTION[i].axis, signed(i)),
+        Dof::Fixed | Dof::Root => Rotation3::identity(),
+    }
+}
+
+/// Right-handed rotation by `deg` degrees about a coordinate axis.
+pub fn axis_rotation(axis: Axis, deg: f64) -> Rotation3<f64> {
+    let (s, c) = deg.to_radians().sin_cos();
+    let m = match axis {
+        Axis::X => Matrix3::new(1.0, 0.0, 0.0, 0.0, c, -s, 0.0, s, c),
+        Axis::Y => Matrix3::new(c, 0.0, s, 0.0, 1.0, 0.0, -s, 0.0, c),
+        Axis::Z => Matrix3::new(c, -s, 0.0, s, c, 0.0, 0.0, 0.0, 1.0),
+    };
+    Rotation3::from_matrix_unchecked(m)
+}
+
+/// A posed body: world frames of the joints and world positions of the tips.
+#[derive(Clone, Debug)]
+pub struct Posed {
+    pub joints: [IsometryMatrix3<f64>; JOINT_COUNT],
+    pub tips: [Point3<f64>; TIP_COUNT],
+}
+
+impl Default for Posed {
+    fn default() -> Self {
+        Posed {
+            joints: [IsometryMatrix3::identity(); JOINT_COUNT],
+            tips: [Point3::origin(); TIP_COUNT],
+        }
+    }
+}
+
+impl Posed {
+    pub fn joint(&self, j: Joint) -> Point3<f64> {
+        Point3::from(self.joints[j.index()].translation.vector)
+    }
+
+    /// The 18 joint positions followed by the 5 tips.
+    pub fn landmarks(&self) -> [Point3<f64>; LANDMARK_COUNT] {
+        let mut out = [Point3::origin(); LANDMARK_COUNT];
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = if i < JOINT_COUNT {
+                Point3::from(self.joints[i].translation.vector)
+            } else {
+                self.tips[i - JOINT_COUNT]
+            };
+        }
+        out
+    }
+}
+
+/// The standard body standing at rest, for tests and defaults.
+pub fn standard_rest() -> (Skeleton, Pose) {
+    (Skeleton::new(&params::STANDARD_SHAPE), params::rest_pose())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn close(a: Point3<f64>, b: [f64; 3], tol: f64) -> bool {
+        (a - Point3::from(b)).norm() < tol
+    }
+
+    #[test]
+    fn rest_pose_stands_on_the_ground_about_175_cm_tall() {
+        let (sk, pose) = standard_rest();
+        let p = sk.posed(&pose);
+        let top = p.tips[Tip::HeadTop as usize];
+        assert!((170.0..180.0).contains(&top.y), "head top at {}", top.y);
+        let ankle = p.joint(Joint::LeftFoot);
+        assert!((ankle.y - standard::ANKLE_HEIGHT).abs() < 1e-9);
+        // Left is +X for a body facing +Z.
+        assert!(p.joint(Joint::LeftHand).x > 10.0 && p.joint(Joint::RightHand).x < -10.0);
+        assert!(p.tips[Tip::LeftToeTip as usize].z > 15.0);
+        for (i, name) in JOINT_NAMES.iter().enumerate() {
+            assert_eq!(Joint::ALL[i].name(), *name);
+            assert_eq!(Joint::ALL[i].index(), i);
+        }
+    }
+
+    #[test]
+    fn signs_make_positive_values_mean_the_documented_movement() {
+        let (sk, rest) = standard_rest();
+        let moved = |name: &str, v: f64| {
+            let mut pose = rest;
+            pose[params::motion_index(name).unwrap()] = v;
+            sk.posed(&pose)
+        };
+        // Elbow flexion brings the wrist forwards (+Z) on both sides.
+        assert!(moved("l_elbow", 90.0).joint(Joint::LeftHand).z > 20.0);
+        assert!(moved("r_elbow", 90.0).joint(Joint::RightHand).z > 20.0);
+        // Shoulder flexion raises the arm forwards; abduction raises it outwards.
+        let up = moved("l_shoulder_x", 90.0).joint(Joint::LeftForeArm);
+        assert!(
+            close(up, [standard::SHOULDER_HALF_WIDTH, 142.0, 29.0], 1e-6),
+            "{up}"
+        );
+        assert!(moved("l_shoulder_z", 90.0).joint(Joint::LeftForeArm).x > 40.0);
+        assert!(moved("r_shoulder_z", 90.0).joint(Joint::RightForeArm).x < -40.0);
+        // Knee flexion takes the ankle backwards; hip flexion the knee forwards.
+        assert!(moved("l_knee", 90.0).joint(Joint::LeftFoot).z < -30.0);
+        assert!(moved("r_hip_x", 90.0).joint(Joint::RightLeg).z > 30.0);
+        // Heading: +90° about Y turns the body to face +X.
+        let turned = moved("root_ry", 90.0);
+        assert!(turned.tips[Tip::LeftToeTip as usize].x > 15.0);
+        // Spine flexion leans the neck forwards.
+        assert!(moved("spine_x", 45.0).joint(Joint::Neck).z > 20.0);
+    }
+
+    #[test]
+    fn shape_scales_the_bones() {
+        let mut shape = params::STANDARD_SHAPE;
+        shape[sx::THIGH] = 1.2;
+        let sk = Skeleton::new(&shape);
+        let p = sk.posed(&params::rest_pose());
+        let thigh = (p.joint(Joint::LeftUpLeg) - p.joint(Joint::LeftLeg)).norm();
+        assert!((thigh - 1.2 * standard::THIGH).abs() < 1e-9);
+    }
+}

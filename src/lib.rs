@@ -1,0 +1,11 @@
+//! monocap: markerless monocular motion capture after Chen et al. (CGI 2005).
+//!
+//! The engine is plain synchronous Rust, laid out as the pipeline:
+//! `clip` (frames in and out) → `body` (model, kinematics, camera, rasterizer)
+//! → `motion` (BVH in and out, retargeting real motion capture) → `synth`
+//! (benchmark clips rendered from real motion capture with their ground truth).
+
+pub mod body;
+pub mod clip;
+pub mod motion;
+pub mod synth;
