@@ -1,0 +1,3 @@
+//! Clips: frames in (decoders arrive with the decoding work) and frames out (writers).
+
+pub mod write;
