@@ -1,0 +1,5 @@
+//! Motion data: BVH in and out, retargeting real motion capture onto the body model.
+
+pub mod bvh;
+pub mod export;
+pub mod retarget;

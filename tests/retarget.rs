@@ -1,0 +1,64 @@
+//! Retargeting the real motion capture in ../shared/data/mocap onto the model.
+
+use std::path::Path;
+
+use monocap::motion::bvh::Bvh;
+use monocap::motion::retarget::{
+    detect_unit_scale, fit_shape, target_joints, JointMap, Retargeter,
+};
+use nalgebra::IsometryMatrix3;
+
+const MOCAP: &str = "../shared/data/mocap";
+
+#[test]
+fn every_shared_mocap_file_retargets_within_a_few_centimetres() {
+    let dir = Path::new(MOCAP);
+    if !dir.is_dir() {
+        println!("skipped: {MOCAP} is absent (a fresh clone has no ../shared)");
+        return;
+    }
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .unwrap()
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    files.retain(|p| p.extension().is_some_and(|e| e == "bvh"));
+    files.sort();
+    assert!(
+        files.len() >= 9,
+        "expected the 9 shared files, found {}",
+        files.len()
+    );
+    for path in files {
+        let bvh = Bvh::read(&path).unwrap();
+        let map = JointMap::detect(&bvh).unwrap();
+        let scale = detect_unit_scale(&bvh, &map);
+        // 30 frames per second of capture, at most 10 s.
+        let step = (bvh.fps() / 30.0).round().max(1.0) as usize;
+        let frames: Vec<usize> = (0..bvh.frame_count()).step_by(step).take(300).collect();
+        let id = IsometryMatrix3::identity();
+        let targets: Vec<_> = frames
+            .iter()
+            .map(|&f| target_joints(&bvh, &map, f, scale, &id))
+            .collect();
+        let shape = fit_shape(&targets);
+        let mut rt = Retargeter::new(&shape);
+        let (mut mean, mut worst, mut p95) = (0.0, 0.0f64, Vec::new());
+        for t in &targets {
+            let (_, r) = rt.solve(t);
+            mean += r.mean_cm / targets.len() as f64;
+            worst = worst.max(r.max_cm);
+            p95.push(r.max_cm);
+        }
+        p95.sort_by(f64::total_cmp);
+        let p95 = p95[p95.len() * 95 / 100];
+        let name = path.file_name().unwrap().to_string_lossy();
+        println!(
+            "{name}: {} frames, {scale:.3} cm/unit, mean joint residual {mean:.2} cm, \
+             95th percentile of the per-frame max {p95:.2} cm, max {worst:.2} cm",
+            targets.len()
+        );
+        assert!(mean < 1.5, "{name}: mean residual {mean:.2} cm");
+        assert!(worst < 7.0, "{name}: worst joint residual {worst:.2} cm");
+    }
+}
