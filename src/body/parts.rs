@@ -76,48 +76,15 @@ pub fn body_parts(shape: &ShapeValues) -> [Part; PART_COUNT] {
         } else {
             (Joint::RightArm, Joint::RightForeArm, Joint::RightHand)
         };
-        [
-            part(
-                "shoulder",
-                s,
-                E,
-                v(0.0, 0.0, 0.0),
-                v(6.0, 6.0, 6.0) * at,
-                Shirt,
-            ),
-            part(
-                "upper_arm",
-                s,
-                C,
-                v(0.0, -upper_arm, 0.0),
-                v(5.0 * at, upper_arm, 5.3 * at),
-                Shirt,
-            ),
-            part(
-                "elbow",
-                f,
-                E,
-                v(0.0, 0.0, 0.0),
-                v(4.3, 4.3, 4.3) * at,
-                Shirt,
-            ),
-            part(
-                "forearm",
-                f,
-                C,
-                v(0.0, -forearm, 0.0),
-                v(4.0 * at, forearm, 4.2 * at),
-                Skin,
-            ),
-            part(
-                "hand",
-                h,
-                E,
-                v(0.0, -hand / 2.0, 0.0),
-                v(2.4 * at, hand / 2.0, 4.6 * at),
-                Skin,
-            ),
-        ]
+        #[rustfmt::skip]
+        let parts = [
+            part("shoulder",  s, E, v(0.0, 0.0, 0.0),        v(6.0, 6.0, 6.0) * at,             Shirt),
+            part("upper_arm", s, C, v(0.0, -upper_arm, 0.0), v(5.0 * at, upper_arm, 5.3 * at), Shirt),
+            part("elbow",     f, E, v(0.0, 0.0, 0.0),        v(4.3, 4.3, 4.3) * at,             Shirt),
+            part("forearm",   f, C, v(0.0, -forearm, 0.0),   v(4.0 * at, forearm, 4.2 * at),   Skin),
+            part("hand",      h, E, v(0.0, -hand / 2.0, 0.0), v(2.4 * at, hand / 2.0, 4.6 * at), Skin),
+        ];
+        parts
     };
     let leg = |side: bool| {
         let (u, l, f) = if side {
@@ -125,98 +92,24 @@ pub fn body_parts(shape: &ShapeValues) -> [Part; PART_COUNT] {
         } else {
             (Joint::RightUpLeg, Joint::RightLeg, Joint::RightFoot)
         };
-        [
-            part(
-                "thigh",
-                u,
-                C,
-                v(0.0, -thigh, 0.0),
-                v(7.8 * lt, thigh, 8.3 * lt),
-                Trousers,
-            ),
-            part(
-                "knee",
-                l,
-                E,
-                v(0.0, 0.0, 0.0),
-                v(5.8, 5.8, 5.8) * lt,
-                Trousers,
-            ),
-            part(
-                "shin",
-                l,
-                C,
-                v(0.0, -shin, 0.0),
-                v(5.3 * lt, shin, 5.6 * lt),
-                Trousers,
-            ),
-            part(
-                "ankle",
-                f,
-                E,
-                v(0.0, 0.0, 0.0),
-                v(4.0, 4.0, 4.0) * lt,
-                Shoes,
-            ),
-            part(
-                "foot",
-                f,
-                E,
-                v(0.0, -4.5, 7.5 * ft),
-                v(4.6, 3.5, 13.0 * ft),
-                Shoes,
-            ),
-        ]
+        #[rustfmt::skip]
+        let parts = [
+            part("thigh", u, C, v(0.0, -thigh, 0.0),   v(7.8 * lt, thigh, 8.3 * lt), Trousers),
+            part("knee",  l, E, v(0.0, 0.0, 0.0),      v(5.8, 5.8, 5.8) * lt,        Trousers),
+            part("shin",  l, C, v(0.0, -shin, 0.0),    v(5.3 * lt, shin, 5.6 * lt),  Trousers),
+            part("ankle", f, E, v(0.0, 0.0, 0.0),      v(4.0, 4.0, 4.0) * lt,        Shoes),
+            part("foot",  f, E, v(0.0, -4.5, 7.5 * ft), v(4.6, 3.5, 13.0 * ft),      Shoes),
+        ];
+        parts
     };
+    #[rustfmt::skip]
     let trunk = [
-        part(
-            "pelvis",
-            Joint::Hips,
-            E,
-            v(0.0, -1.0, 0.0),
-            v(15.5 * pw, 11.0, 10.5 * td),
-            Trousers,
-        ),
-        part(
-            "abdomen",
-            Joint::Spine,
-            C,
-            v(0.0, -8.0 * th, 0.0),
-            v(13.5 * tw, 0.55 * torso, 9.5 * td),
-            Shirt,
-        ),
-        part(
-            "chest",
-            Joint::Spine,
-            C,
-            v(0.0, 0.35 * torso, 0.0),
-            v(15.5 * tw, 0.55 * torso, 10.5 * td),
-            Shirt,
-        ),
-        part(
-            "shoulders",
-            Joint::Spine,
-            E,
-            v(0.0, 0.88 * torso, 0.0),
-            v(18.5 * tw, 6.5, 9.0 * td),
-            Shirt,
-        ),
-        part(
-            "neck",
-            Joint::Neck,
-            C,
-            v(0.0, -3.0, 0.0),
-            v(5.5, standard::NECK * th + 4.0, 6.0),
-            Skin,
-        ),
-        part(
-            "head",
-            Joint::Head,
-            E,
-            v(0.0, 10.0 * hd, 1.5 * hd),
-            v(8.0, 11.0, 10.0) * hd,
-            Skin,
-        ),
+        part("pelvis",    Joint::Hips,  E, v(0.0, -1.0, 0.0),         v(15.5 * pw, 11.0, 10.5 * td),             Trousers),
+        part("abdomen",   Joint::Spine, C, v(0.0, -8.0 * th, 0.0),    v(13.5 * tw, 0.55 * torso, 9.5 * td),      Shirt),
+        part("chest",     Joint::Spine, C, v(0.0, 0.35 * torso, 0.0), v(15.5 * tw, 0.55 * torso, 10.5 * td),     Shirt),
+        part("shoulders", Joint::Spine, E, v(0.0, 0.88 * torso, 0.0), v(18.5 * tw, 6.5, 9.0 * td),               Shirt),
+        part("neck",      Joint::Neck,  C, v(0.0, -3.0, 0.0),         v(5.5, standard::NECK * th + 4.0, 6.0),    Skin),
+        part("head",      Joint::Head,  E, v(0.0, 10.0 * hd, 1.5 * hd), v(8.0, 11.0, 10.0) * hd,                Skin),
     ];
     let (la, ra, ll, rl) = (arm(true), arm(false), leg(true), leg(false));
     let mut out = [trunk[0]; PART_COUNT];
