@@ -5,9 +5,9 @@ use std::io::{BufWriter, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::{anyhow, Context, Result};
 use clap::{Args, Parser, Subcommand};
-use monocap::motion::bvh::Bvh;
+use monocap::motion::bvh::{Bvh, BvhError};
 use monocap::synth::{self, Style, SynthOptions};
 
 #[derive(Parser)]
@@ -72,17 +72,36 @@ fn main() -> ExitCode {
         Ok(cli) => cli,
         Err(e) => {
             use clap::error::ErrorKind::*;
-            if matches!(
-                e.kind(),
-                DisplayHelp | DisplayVersion | DisplayHelpOnMissingArgumentOrSubcommand
-            ) {
-                let _ = e.print();
-                return ExitCode::SUCCESS;
+            match e.kind() {
+                DisplayHelp | DisplayVersion => {
+                    let _ = e.print();
+                    return ExitCode::SUCCESS;
+                }
+                // `monocap` alone: the help, but as a usage error.
+                DisplayHelpOnMissingArgumentOrSubcommand => {
+                    let _ = e.print();
+                    return ExitCode::from(2);
+                }
+                _ => {}
             }
-            // One line naming the problem (clap adds usage lines after it).
+            // One line naming the problem: clap's first paragraph (which lists missing
+            // arguments on lines of their own), without the usage and tips after it.
             let text = e.render().to_string();
-            let first = text.lines().next().unwrap_or("invalid arguments");
-            eprintln!("monocap: {}", first.trim_start_matches("error: "));
+            let first: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.is_empty())
+                .collect();
+            let first = first.join(" ");
+            let first = first.trim_start_matches("error: ");
+            eprintln!(
+                "monocap: {}",
+                if first.is_empty() {
+                    "invalid arguments"
+                } else {
+                    first
+                }
+            );
             return ExitCode::from(2);
         }
     };
@@ -102,7 +121,12 @@ fn run(cli: Cli) -> Result<()> {
 }
 
 fn synth_command(a: SynthArgs) -> Result<()> {
-    let bvh = Bvh::read(&a.bvh)?;
+    // Parse errors name the line but not the file; I/O errors name the file and
+    // would repeat their cause if kept as an error chain.
+    let bvh = Bvh::read(&a.bvh).map_err(|e| match e {
+        BvhError::Io { .. } | BvhError::FileTooLarge { .. } => anyhow!("{e}"),
+        e => anyhow!("{}: {e}", a.bvh.display()),
+    })?;
     let opts = SynthOptions {
         width: a.width,
         height: a.height,

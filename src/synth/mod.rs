@@ -294,7 +294,7 @@ pub fn synthesize(bvh: &Bvh, source_name: &str, opts: &SynthOptions, out: &Path)
         source: Source {
             file: source_name.to_string(),
             first_frame: frames[0],
-            frame_step: bvh.fps() / opts.fps,
+            frame_step: frame_step(bvh, opts),
             fps: bvh.fps(),
             cm_per_unit: cm,
         },
@@ -311,6 +311,18 @@ pub fn synthesize(bvh: &Bvh, source_name: &str, opts: &SynthOptions, out: &Path)
     })
 }
 
+/// Source frames per clip frame. Frame times are written with few digits (CMU's
+/// `.0083333` for 120 fps), so a ratio within 0.1% of a whole number is that number.
+fn frame_step(bvh: &Bvh, opts: &SynthOptions) -> f64 {
+    let step = bvh.fps() / opts.fps;
+    let whole = step.round();
+    if whole >= 1.0 && (step - whole).abs() < 1e-3 * whole {
+        whole
+    } else {
+        step
+    }
+}
+
 /// Source frames nearest to each clip frame's time.
 fn pick_frames(bvh: &Bvh, opts: &SynthOptions) -> Result<Vec<usize>> {
     let n = bvh.frame_count();
@@ -324,7 +336,7 @@ fn pick_frames(bvh: &Bvh, opts: &SynthOptions) -> Result<Vec<usize>> {
             n - 1
         );
     }
-    let step = bvh.fps() / opts.fps;
+    let step = frame_step(bvh, opts);
     let limit = match opts.duration_s {
         Some(d) => ((d * opts.fps).round() as usize).max(1),
         None => usize::MAX,

@@ -1,0 +1,245 @@
+//! The `monocap` binary's contract (contracts.md): exit status 0 and the promised files
+//! on success; on failure a non-zero status and ONE line on stderr naming the problem.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
+
+/// A fresh directory under the system temp dir, removed when dropped (also on panic).
+struct TempDir(PathBuf);
+
+impl TempDir {
+    fn new(tag: &str) -> TempDir {
+        let dir =
+            std::env::temp_dir().join(format!("monocap-cli-test-{}-{tag}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        TempDir(dir)
+    }
+
+    fn join(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn monocap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monocap"))
+        .args(args)
+        .output()
+        .expect("the monocap binary runs")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// `synth` on the fixture into `out`, with `extra` arguments.
+fn synth(out: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["synth", "--bvh", FIXTURE, "--out", s(out)];
+    args.extend_from_slice(extra);
+    monocap(&args)
+}
+
+fn assert_success(what: &str, out: &Output) {
+    assert!(
+        out.status.success(),
+        "{what}: exit status {:?}, stderr {:?}",
+        out.status.code(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// Non-zero exit, exactly one non-empty line on stderr containing `needle`, no panic.
+fn assert_fails_with(what: &str, out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!("{what}: {:?} {}", out.status.code(), stderr.trim_end());
+    assert!(
+        !out.status.success(),
+        "{what}: succeeded, stderr {stderr:?}"
+    );
+    assert!(!stderr.contains("panicked"), "{what}: panicked: {stderr}");
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(
+        lines.len(),
+        1,
+        "{what}: expected one line on stderr, got {stderr:?}"
+    );
+    assert!(
+        lines[0].trim().len() > "monocap:".len(),
+        "{what}: empty message {stderr:?}"
+    );
+    assert!(
+        lines[0].contains(needle),
+        "{what}: {stderr:?} does not mention {needle:?}"
+    );
+}
+
+fn read_json(path: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(path)
+        .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
+    serde_json::from_str(&text).unwrap_or_else(|e| panic!("{} is not JSON: {e}", path.display()))
+}
+
+#[test]
+fn synth_writes_the_clip_and_its_truth() {
+    let tmp = TempDir::new("ok");
+    let clip = tmp.join("x.y4m");
+    let truth = tmp.join("t.json");
+    let out = synth(
+        &clip,
+        &[
+            "--truth",
+            s(&truth),
+            "--empty-frames",
+            "2",
+            "--style",
+            "color",
+        ],
+    );
+    assert_success("y4m", &out);
+    let size = std::fs::metadata(&clip).unwrap().len();
+    // 22 frames of 320×240 4:2:0 (115,200 bytes each) plus headers.
+    assert!(size > 22 * 115_200, "{} is {size} bytes", clip.display());
+    let header = std::fs::read(&clip).unwrap();
+    assert!(header.starts_with(b"YUV4MPEG2 "), "not a Y4M file");
+    let json = read_json(&truth);
+    assert_eq!(json["format"], "monocap.truth/1");
+    assert_eq!(json["frame_count"], 22);
+    assert_eq!(json["empty_frames"], 2);
+    assert_eq!(json["image"]["width"], 320);
+    assert_eq!(json["image"]["height"], 240);
+    assert_eq!(json["source"]["file"], "bandai_run_normal_001_20f.bvh");
+    let frames = json["frames"].as_array().unwrap();
+    assert_eq!(frames.len(), 20);
+    assert_eq!(frames[0]["index"], 2);
+    let joints = json["source_joints"].as_array().unwrap().len();
+    assert!(joints > 18);
+    assert_eq!(frames[0]["joints3d"].as_array().unwrap().len(), joints);
+    assert_eq!(frames[0]["joints2d"].as_array().unwrap().len(), joints);
+    // No temporary file is left next to the outputs.
+    let mut names: Vec<String> = std::fs::read_dir(&tmp.0)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["t.json", "x.y4m"]);
+}
+
+#[test]
+fn synth_writes_gif_and_zip_and_takes_negative_azimuths() {
+    let tmp = TempDir::new("formats");
+    let gif = tmp.join("x.gif");
+    let out = synth(
+        &gif,
+        &["--duration-s", "0.2", "--width", "80", "--height", "60"],
+    );
+    assert_success("gif", &out);
+    assert!(std::fs::read(&gif).unwrap().starts_with(b"GIF8"));
+
+    let zip = tmp.join("x.zip");
+    let truth = tmp.join("t.json");
+    let out = synth(
+        &zip,
+        &[
+            "--azimuth-deg",
+            "-90",
+            "--style",
+            "silhouette",
+            "--truth",
+            s(&truth),
+            "--empty-frames",
+            "1",
+        ],
+    );
+    assert_success("zip with --azimuth-deg -90", &out);
+    assert!(std::fs::read(&zip).unwrap().starts_with(b"PK"));
+    let json = read_json(&truth);
+    assert_eq!(json["camera"]["azimuth_deg"], -90.0);
+    assert_eq!(json["frame_count"], 21);
+
+    let out = synth(&tmp.join("y.zip"), &["--azimuth-deg=-90.5", "--seed", "7"]);
+    assert_success("--azimuth-deg=-90.5", &out);
+}
+
+#[test]
+fn help_exits_zero() {
+    for args in [&["--help"][..], &["synth", "--help"]] {
+        let out = monocap(args);
+        assert_success(&format!("{args:?}"), &out);
+        let text = String::from_utf8_lossy(&out.stdout);
+        assert!(text.contains("Usage"), "{args:?}: {text}");
+    }
+}
+
+#[test]
+fn bad_input_fails_with_one_line_naming_the_problem() {
+    let tmp = TempDir::new("bad");
+    let fixture = std::fs::read_to_string(FIXTURE).unwrap();
+    let out = tmp.join("x.zip");
+
+    // Input files that are not usable captures.
+    let missing = tmp.join("no-such-capture.bvh");
+    let garbage = tmp.join("garbage.bvh");
+    let bytes: Vec<u8> = (0u32..4096)
+        .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
+        .collect();
+    std::fs::write(&garbage, bytes).unwrap();
+    let truncated = tmp.join("truncated.bvh");
+    std::fs::write(&truncated, &fixture[..fixture.len() / 2]).unwrap();
+    let huge = tmp.join("huge.bvh");
+    let declared = fixture.replacen("Frames:\t20", "Frames:\t1000000000", 1);
+    assert_ne!(declared, fixture, "the fixture's frame count line changed");
+    std::fs::write(&huge, declared).unwrap();
+    for (what, path, needle) in [
+        ("missing BVH", &missing, "no-such-capture.bvh"),
+        ("garbage BVH", &garbage, "garbage.bvh"),
+        ("truncated BVH", &truncated, "truncated.bvh"),
+        ("a billion frames", &huge, "1000000000"),
+    ] {
+        let result = monocap(&["synth", "--bvh", s(path), "--out", s(&out)]);
+        assert_fails_with(what, &result, needle);
+    }
+    let result = monocap(&["synth", "--bvh", s(&truncated), "--out", s(&out)]);
+    assert_fails_with("truncated BVH", &result, "file ends");
+
+    // Options.
+    let nowhere = tmp.join("no-such-dir").join("x.zip");
+    for (what, out, extra, needle) in [
+        ("--fps 0", &out, &["--fps", "0"][..], "frame rate"),
+        ("--width 0", &out, &["--width", "0"], "image size"),
+        (
+            "--fov-deg 500",
+            &out,
+            &["--fov-deg", "500"],
+            "field of view",
+        ),
+        (
+            "--first-frame",
+            &out,
+            &["--first-frame", "100000"],
+            "first frame",
+        ),
+        ("--bogus", &out, &["--bogus"], "unexpected argument"),
+        ("--style blue", &out, &["--style", "blue"], "blue"),
+        ("--fps abc", &out, &["--fps", "abc"], "--fps"),
+        ("--duration-s 0", &out, &["--duration-s", "0"], "duration"),
+        ("output extension", &tmp.join("x.xyz"), &[], "extension"),
+        ("output directory", &nowhere, &[], "no-such-dir"),
+    ] {
+        assert_fails_with(what, &synth(out, extra), needle);
+    }
+    assert!(!out.exists() && !tmp.join("x.xyz").exists());
+
+    // Missing required arguments are named on the one line.
+    let result = monocap(&["synth", "--bvh", FIXTURE]);
+    assert_fails_with("no --out", &result, "--out");
+    let result = monocap(&["frobnicate"]);
+    assert_fails_with("unknown command", &result, "frobnicate");
+}
