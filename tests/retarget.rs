@@ -62,3 +62,55 @@ fn every_shared_mocap_file_retargets_within_a_few_centimetres() {
         assert!(worst < 7.0, "{name}: worst joint residual {worst:.2} cm");
     }
 }
+
+/// The same skeleton under Mixamo's names must map onto the same joints, although
+/// Mixamo calls the collar bone `LeftShoulder` (CMU's shoulder joint) and the shoulder
+/// joint `LeftArm`.
+#[test]
+fn mixamo_names_map_onto_the_same_joints_as_cmu_names() {
+    let text = std::fs::read_to_string("tests/fixtures/cmu_131_01_10f.bvh").unwrap();
+    let cmu = Bvh::parse(&text).unwrap();
+    let renames = [
+        ("Hips", "Hips"),
+        ("LeftHip", "LeftUpLeg"),
+        ("LeftKnee", "LeftLeg"),
+        ("LeftAnkle", "LeftFoot"),
+        ("LeftToe", "LeftToeBase"),
+        ("RightHip", "RightUpLeg"),
+        ("RightKnee", "RightLeg"),
+        ("RightAnkle", "RightFoot"),
+        ("RightToe", "RightToeBase"),
+        ("lowerback", "Spine"),
+        ("Chest", "Spine1"),
+        ("Chest2", "Spine2"),
+        ("Neck", "Neck"),
+        ("Head", "Head"),
+        ("LeftCollar", "LeftShoulder"),
+        ("LeftShoulder", "LeftArm"),
+        ("LeftElbow", "LeftForeArm"),
+        ("LeftWrist", "LeftHand"),
+        ("RightCollar", "RightShoulder"),
+        ("RightShoulder", "RightArm"),
+        ("RightElbow", "RightForeArm"),
+        ("RightWrist", "RightHand"),
+    ];
+    let mut mixamo = cmu.clone();
+    for j in &mut mixamo.joints {
+        let new = renames
+            .iter()
+            .find(|(old, _)| *old == j.name)
+            .map(|(_, new)| *new);
+        // Joints Mixamo has no name for keep a neutral one.
+        j.name = match new {
+            Some(n) => format!("mixamorig:{n}"),
+            None => format!("mixamorig:extra_{}", j.name),
+        };
+    }
+    let a = JointMap::detect(&cmu).unwrap();
+    let b = JointMap::detect(&mixamo).unwrap();
+    assert_eq!(a.source, b.source);
+    let name = |i: usize| cmu.joints[i].name.as_str();
+    let left_arm = monocap::body::Joint::LeftArm.index();
+    assert_eq!(name(a.source[left_arm]), "LeftShoulder");
+    assert_eq!(name(b.source[left_arm]), "LeftShoulder");
+}
