@@ -704,8 +704,11 @@ impl Y4mSink {
         let (width, height) = (width as usize, height as usize);
         let out = SharedOut::new(out);
         let rate = y4m::Ratio::new(rate.0 as usize, rate.1 as usize);
+        // The samples are full range; say so, or readers (FFmpeg too) assume limited.
+        let range = y4m::VendorExtensionString::new(b"COLORRANGE=FULL".to_vec())?;
         let encoder = y4m::encode(width, height, rate)
             .with_colorspace(y4m::Colorspace::C420jpeg)
+            .append_vendor_extension(range)
             .write_header(out.clone())?;
         let chroma = width.div_ceil(2) * height.div_ceil(2);
         Ok(Y4mSink {
