@@ -14,6 +14,8 @@
 //!    background with per-frame sensor noise, so background subtraction has real work
 //!    to do. `empty_frames` person-free frames lead.
 
+pub mod composite;
+
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
@@ -183,6 +185,28 @@ pub struct TruthFrame {
 /// Renders the clip to `out` (format by extension) and returns its truth.
 pub fn synthesize(bvh: &Bvh, source_name: &str, opts: &SynthOptions, out: &Path) -> Result<Truth> {
     opts.validate()?;
+    let mut writer = write::create(out, opts.width, opts.height, opts.fps)?;
+    let truth = synthesize_with(bvh, source_name, opts, |f| Ok(writer.push(f.image)?))?;
+    writer.finish()?;
+    Ok(truth)
+}
+
+/// One rendered frame, handed to the sink of [`synthesize_with`].
+pub struct SynthFrame<'a> {
+    pub index: usize,
+    pub image: Frame<'a>,
+    /// The model's true silhouette (empty on person-free frames).
+    pub mask: &'a Mask,
+}
+
+/// Renders the clip frame by frame into `sink` and returns its truth.
+pub fn synthesize_with(
+    bvh: &Bvh,
+    source_name: &str,
+    opts: &SynthOptions,
+    mut sink: impl FnMut(SynthFrame<'_>) -> Result<()>,
+) -> Result<Truth> {
+    opts.validate()?;
     let map = JointMap::detect(bvh)?;
     let cm = detect_unit_scale(bvh, &map);
     let frames = pick_frames(bvh, opts)?;
@@ -221,16 +245,20 @@ pub fn synthesize(bvh: &Bvh, source_name: &str, opts: &SynthOptions, out: &Path)
     let camera = &cam.camera;
 
     // Render.
-    let mut writer = write::create(out, opts.width, opts.height, opts.fps)?;
     let mut scene = Scene::new(opts, camera);
-    for _ in 0..opts.empty_frames {
-        scene.draw(None, &body, camera, &mut *writer)?;
+    for index in 0..opts.empty_frames {
+        scene.draw(index, None, &body, camera, &mut sink)?;
     }
-    for pose in &poses {
+    for (k, pose) in poses.iter().enumerate() {
         let posed = body.posed(pose);
-        scene.draw(Some(&posed), &body, camera, &mut *writer)?;
+        scene.draw(
+            opts.empty_frames + k,
+            Some(&posed),
+            &body,
+            camera,
+            &mut sink,
+        )?;
     }
-    writer.finish()?;
 
     // Truth.
     let proj = |p: &Point3<f64>| -> Result<[f64; 2]> {
@@ -476,10 +504,11 @@ impl Scene {
 
     fn draw(
         &mut self,
+        index: usize,
         posed: Option<&crate::body::Posed>,
         body: &Body,
         camera: &Camera,
-        writer: &mut dyn write::ClipWriter,
+        sink: &mut impl FnMut(SynthFrame<'_>) -> Result<()>,
     ) -> Result<()> {
         // The model was retargeted in the camera frame: render it with an identity
         // extrinsic.
@@ -487,13 +516,18 @@ impl Scene {
             world_to_camera: IsometryMatrix3::identity(),
             ..camera.clone()
         };
+        self.mask.clear();
+        if let Some(posed) = posed {
+            render_mask(body, posed, &model_cam, &mut self.mask);
+        }
         match self.style {
             Style::Silhouette => {
-                self.mask.clear();
-                if let Some(posed) = posed {
-                    render_mask(body, posed, &model_cam, &mut self.mask);
-                }
-                writer.push(Frame::Gray(&self.mask.to_gray()))?;
+                let gray = self.mask.to_gray();
+                sink(SynthFrame {
+                    index,
+                    image: Frame::Gray(&gray),
+                    mask: &self.mask,
+                })?;
             }
             Style::Color => {
                 self.frame.copy_from_slice(&self.background);
@@ -507,7 +541,11 @@ impl Scene {
                         *c = (*c as f64 + n).round().clamp(0.0, 255.0) as u8;
                     }
                 }
-                writer.push(Frame::Rgb(&self.frame))?;
+                sink(SynthFrame {
+                    index,
+                    image: Frame::Rgb(&self.frame),
+                    mask: &self.mask,
+                })?;
             }
         }
         Ok(())
