@@ -9,3 +9,4 @@ pub mod body;
 pub mod clip;
 pub mod motion;
 pub mod synth;
+pub mod vision;

@@ -1,0 +1,89 @@
+//! Silhouettes of a clip: learn the background in a first pass over the frames,
+//! then segment and clean each frame in a second pass (method.md §3). Both passes
+//! stream: between them only the background model is kept (about 110 bytes a pixel),
+//! never the frames. A clip of masks skips background subtraction: its frames are
+//! thresholded as they are.
+
+use image::RgbImage;
+
+use super::background::{
+    BackgroundBuilder, BackgroundModel, BackgroundOptions, ModelSource, Refiner,
+};
+use super::cleanup::{clean_with_unknown, person_region, CleanupOptions};
+use crate::body::Mask;
+
+#[derive(Clone, Debug)]
+pub struct SilhouetteOptions {
+    pub background: BackgroundOptions,
+    pub cleanup: CleanupOptions,
+    /// Without person-free frames: re-learn the scene from what each frame shows
+    /// outside its person, grown by this fraction of the image height (None: no
+    /// second pass).
+    pub refine_grow: Option<f64>,
+}
+
+impl Default for SilhouetteOptions {
+    fn default() -> Self {
+        SilhouetteOptions {
+            background: BackgroundOptions::default(),
+            cleanup: CleanupOptions::default(),
+            refine_grow: Some(0.03),
+        }
+    }
+}
+
+/// Segments frames against a learned background.
+pub struct Segmenter {
+    pub model: BackgroundModel,
+    opts: SilhouetteOptions,
+}
+
+impl Segmenter {
+    /// Learns the background. `pass` must run through the whole clip once, calling
+    /// its argument on every frame in order; it is called once, or twice when the
+    /// clip has no person-free frames (the second pass refines the model, see
+    /// [`Refiner`]).
+    pub fn learn<E>(
+        width: u32,
+        height: u32,
+        opts: &SilhouetteOptions,
+        mut pass: impl FnMut(&mut dyn FnMut(&RgbImage)) -> Result<(), E>,
+    ) -> Result<Segmenter, E> {
+        let mut builder = BackgroundBuilder::new(width, height, opts.background.empty.clone());
+        pass(&mut |f| builder.push(f))?;
+        let mut model = builder.finish();
+        if let (ModelSource::WholeClip { .. }, Some(grow)) = (&model.source, opts.refine_grow) {
+            let mut refiner = Refiner::new(model);
+            let mut raw = Mask::new(width, height);
+            let grow = ((height as f64 * grow).round().min(255.0) as u8).max(1);
+            pass(&mut |f| {
+                refiner.base().foreground(f, &opts.background, &mut raw);
+                let person = person_region(&raw, &opts.cleanup, grow);
+                refiner.push(f, &person);
+            })?;
+            model = refiner.finish();
+        }
+        Ok(Segmenter {
+            model,
+            opts: opts.clone(),
+        })
+    }
+
+    /// The cleaned silhouette of one frame.
+    pub fn silhouette(&self, frame: &RgbImage, out: &mut Mask) {
+        self.model.foreground(frame, &self.opts.background, out);
+        clean_with_unknown(out, &self.opts.cleanup, self.model.unknown.as_ref());
+    }
+}
+
+/// A mask frame (a silhouette clip) as a [`Mask`]: set where the pixel is bright.
+pub fn mask_from_frame(frame: &RgbImage) -> Mask {
+    let mut m = Mask::new(frame.width(), frame.height());
+    for (x, y, p) in frame.enumerate_pixels() {
+        let [r, g, b] = p.0;
+        if (r as u32 + g as u32 + b as u32) >= 3 * 128 {
+            m.set(x, y, true);
+        }
+    }
+    m
+}
