@@ -7,8 +7,12 @@ use std::process::ExitCode;
 
 use anyhow::{anyhow, Context, Result};
 use clap::{Args, Parser, Subcommand};
+use monocap::clip::{write, Limits};
 use monocap::motion::bvh::{Bvh, BvhError};
 use monocap::synth::{self, Style, SynthOptions};
+use monocap::vision::background::{EmptyFrames, ModelSource};
+use monocap::vision::features::{self, FeatureOptions, FrameFeatures};
+use monocap::vision::silhouette::{clip_silhouettes, SilhouetteOptions};
 
 #[derive(Parser)]
 #[command(
@@ -23,8 +27,36 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Print what a clip is (JSON: container, codec, width, height, fps, frame_count, duration_s).
+    Probe(ProbeArgs),
+    /// Extract the person's silhouette from every frame of a clip.
+    Silhouettes(SilhouettesArgs),
     /// Render a clip of the body model driven by real motion capture, with its ground truth.
     Synth(SynthArgs),
+}
+
+#[derive(Args)]
+struct ProbeArgs {
+    /// MP4/AVI (H.264, MJPEG), Y4M, GIF/APNG/WebP, ZIP/TAR of frames; anything else via ffmpeg.
+    clip: PathBuf,
+}
+
+#[derive(Args)]
+struct SilhouettesArgs {
+    clip: PathBuf,
+    /// Output: one 0/255 PNG per frame in a .zip or .tar (or a .gif/.y4m clip).
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
+    /// Person-free frames: auto (still leading frames), none, or a range A..B.
+    #[arg(long, default_value = "auto")]
+    empty_frames: String,
+    /// The clip already is a sequence of masks: threshold it, no background subtraction.
+    #[arg(long)]
+    masks: bool,
+    /// Also write what the tracker sees per frame (silhouette, coremap, edges, outline
+    /// features) as a clip (.zip of PNGs, .gif, ...).
+    #[arg(long)]
+    debug: Option<PathBuf>,
 }
 
 #[derive(Args)]
@@ -116,8 +148,91 @@ fn main() -> ExitCode {
 
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
+        Command::Probe(a) => probe_command(a),
+        Command::Silhouettes(a) => silhouettes_command(a),
         Command::Synth(a) => synth_command(a),
     }
+}
+
+fn probe_command(a: ProbeArgs) -> Result<()> {
+    let info = monocap::clip::open::probe(&a.clip, &Limits::default())?;
+    println!("{}", serde_json::to_string_pretty(&info)?);
+    Ok(())
+}
+
+fn parse_empty_frames(text: &str) -> Result<EmptyFrames> {
+    Ok(match text {
+        "auto" => EmptyFrames::Auto,
+        "none" => EmptyFrames::None,
+        range => {
+            let (a, b) = range.split_once("..").with_context(|| {
+                format!("--empty-frames {range:?}: expected auto, none or a range A..B")
+            })?;
+            let parse = |v: &str| {
+                v.trim().parse::<usize>().with_context(|| {
+                    format!("--empty-frames {range:?}: {v:?} is not a frame number")
+                })
+            };
+            let (a, b) = (parse(a)?, parse(b)?);
+            if a >= b {
+                anyhow::bail!("--empty-frames {range:?}: the range is empty");
+            }
+            EmptyFrames::Range(a, b)
+        }
+    })
+}
+
+fn silhouettes_command(a: SilhouettesArgs) -> Result<()> {
+    let limits = Limits::default();
+    let mut opts = SilhouetteOptions::default();
+    opts.background.empty = parse_empty_frames(&a.empty_frames)?;
+    let info = monocap::clip::open::probe(&a.clip, &limits)?;
+    let fps = if info.fps > 0.0 { info.fps } else { 30.0 };
+    let mut out = write::create(&a.out, info.width, info.height, fps)?;
+    let mut debug = match &a.debug {
+        Some(p) => Some(write::create(p, info.width * 2, info.height, fps)?),
+        None => None,
+    };
+    let feature_opts = FeatureOptions::default();
+    let mut previous: Option<FrameFeatures> = None;
+    let start = std::time::Instant::now();
+    let done = clip_silhouettes(&a.clip, &limits, &opts, a.masks, |_, frame, mask| {
+        out.push(write::Frame::Gray(&mask.to_gray()))?;
+        if let Some(debug) = debug.as_mut() {
+            let f = features::compute(mask, Some(frame), previous.as_ref(), &feature_opts);
+            debug.push(write::Frame::Rgb(&features::debug_image(
+                Some(frame),
+                mask,
+                &f,
+            )))?;
+            previous = Some(f);
+        }
+        Ok(())
+    })?;
+    out.finish()?;
+    if let Some(debug) = debug {
+        debug.finish()?;
+    }
+    let secs = start.elapsed().as_secs_f64();
+    let how = match &done.source {
+        None => "a mask clip, read as it is".to_string(),
+        Some(ModelSource::EmptyFrames { first, count }) => {
+            format!(
+                "background from person-free frames {first}..{}",
+                first + count
+            )
+        }
+        Some(ModelSource::WholeClip { frames }) => {
+            format!("background from the whole clip ({frames} frames)")
+        }
+    };
+    eprintln!(
+        "monocap: wrote {} ({} silhouettes, {how}; {:.1} frames/s)",
+        a.out.display(),
+        done.frames,
+        done.frames as f64 / secs.max(1e-9)
+    );
+    Ok(())
 }
 
 fn synth_command(a: SynthArgs) -> Result<()> {

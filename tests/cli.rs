@@ -243,3 +243,90 @@ fn bad_input_fails_with_one_line_naming_the_problem() {
     let result = monocap(&["frobnicate"]);
     assert_fails_with("unknown command", &result, "frobnicate");
 }
+
+#[test]
+fn probe_and_silhouettes_on_a_synthetic_clip() {
+    let dir = TempDir::new("probe-sil");
+    let clip = dir.join("clip.y4m");
+    assert_success(
+        "synth",
+        &synth(&clip, &["--empty-frames", "6", "--style", "color"]),
+    );
+
+    let out = monocap(&["probe", s(&clip)]);
+    assert_success("probe", &out);
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).expect("probe prints JSON");
+    assert_eq!(info["container"], "y4m");
+    assert_eq!(info["width"], 320);
+    assert_eq!(info["height"], 240);
+    assert_eq!(info["fps"], 30.0);
+    assert_eq!(info["frame_count"], 26);
+    assert!((info["duration_s"].as_f64().unwrap() - 26.0 / 30.0).abs() < 1e-9);
+    for key in [
+        "codec",
+        "container",
+        "width",
+        "height",
+        "fps",
+        "frame_count",
+        "duration_s",
+    ] {
+        assert!(info.get(key).is_some(), "probe lacks {key}");
+    }
+
+    let masks = dir.join("masks.zip");
+    let debug = dir.join("debug.zip");
+    let out = monocap(&[
+        "silhouettes",
+        s(&clip),
+        "-o",
+        s(&masks),
+        "--debug",
+        s(&debug),
+    ]);
+    assert_success("silhouettes", &out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("person-free frames 0..6"), "{stderr}");
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&masks).unwrap()).unwrap();
+    assert_eq!(zip.len(), 26);
+    let name = zip.by_index(0).unwrap().name().unwrap().to_string();
+    assert_eq!(name, "000000.png");
+    let mut last = Vec::new();
+    std::io::Read::read_to_end(&mut zip.by_name("000025.png").unwrap(), &mut last).unwrap();
+    let img = image::load_from_memory(&last).unwrap().to_luma8();
+    assert!(
+        img.pixels().all(|p| p.0[0] == 0 || p.0[0] == 255),
+        "masks are 0/255"
+    );
+    let on = img.pixels().filter(|p| p.0[0] == 255).count();
+    assert!(on > 500, "the person is found ({on} pixels)");
+    let dbg = zip::ZipArchive::new(std::fs::File::open(&debug).unwrap()).unwrap();
+    assert_eq!(dbg.len(), 26);
+
+    // The masks read back as a mask clip.
+    let out = monocap(&["probe", s(&masks)]);
+    assert_success("probe masks", &out);
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!(info["frame_count"], 26);
+
+    let text = dir.join("notes.mp4");
+    std::fs::write(&text, "not a video").unwrap();
+    assert_fails_with("probe text", &monocap(&["probe", s(&text)]), "notes.mp4");
+    assert_fails_with(
+        "bad range",
+        &monocap(&[
+            "silhouettes",
+            s(&clip),
+            "-o",
+            s(&masks),
+            "--empty-frames",
+            "9..3",
+        ]),
+        "empty-frames",
+    );
+    assert_fails_with(
+        "bad output",
+        &monocap(&["silhouettes", s(&clip), "-o", s(&dir.join("m.xyz"))]),
+        "extension",
+    );
+}

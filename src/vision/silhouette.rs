@@ -87,3 +87,74 @@ pub fn mask_from_frame(frame: &RgbImage) -> Mask {
     }
     m
 }
+
+/// What [`clip_silhouettes`] found.
+#[derive(Clone, Debug)]
+pub struct ClipSilhouettes {
+    pub info: crate::clip::ClipInfo,
+    /// Where the background came from (None for a mask clip).
+    pub source: Option<ModelSource>,
+    pub frames: usize,
+}
+
+/// The silhouette of every frame of the clip at `path`, handed to `each` with the
+/// frame, in order. A mask clip (`masks`, or a ZIP/TAR of binary frames) is read as
+/// it is; any other clip is decoded once or twice to learn the background and once
+/// more to segment it.
+pub fn clip_silhouettes(
+    path: &std::path::Path,
+    limits: &crate::clip::Limits,
+    opts: &SilhouetteOptions,
+    masks: bool,
+    mut each: impl FnMut(usize, &RgbImage, &Mask) -> anyhow::Result<()>,
+) -> anyhow::Result<ClipSilhouettes> {
+    use crate::clip::open::{open, open_with, probe};
+    let info = probe(path, limits)?;
+    let (w, h) = (info.width, info.height);
+    let size_check = |f: &RgbImage| -> anyhow::Result<()> {
+        if f.dimensions() != (w, h) {
+            anyhow::bail!(
+                "{}: a frame of {}×{} in a clip of {w}×{h} (frame sizes must not change)",
+                path.display(),
+                f.width(),
+                f.height()
+            );
+        }
+        Ok(())
+    };
+    let mut frames = 0;
+    if masks || info.is_mask {
+        let mut src = open_with(path, limits, true)?;
+        while let Some(f) = src.next_frame()? {
+            size_check(&f)?;
+            each(frames, &f, &mask_from_frame(&f))?;
+            frames += 1;
+        }
+        return Ok(ClipSilhouettes {
+            info,
+            source: None,
+            frames,
+        });
+    }
+    let seg = Segmenter::learn(w, h, opts, |visit| {
+        let mut src = open(path, limits)?;
+        while let Some(f) = src.next_frame()? {
+            size_check(&f)?;
+            visit(&f);
+        }
+        Ok::<_, anyhow::Error>(())
+    })?;
+    let mut src = open(path, limits)?;
+    let mut mask = Mask::new(w, h);
+    while let Some(f) = src.next_frame()? {
+        size_check(&f)?;
+        seg.silhouette(&f, &mut mask);
+        each(frames, &f, &mask)?;
+        frames += 1;
+    }
+    Ok(ClipSilhouettes {
+        info,
+        source: Some(seg.model.source.clone()),
+        frames,
+    })
+}
