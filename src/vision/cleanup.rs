@@ -1,10 +1,10 @@
 //! Clean-up of a raw foreground mask (method.md §3.3): optional closing, size-based
 //! blob filtering that keeps the person's detached pieces, and hole filling.
 
-use image::{GrayImage, Luma};
 use imageproc::distance_transform::Norm;
 use imageproc::morphology::dilate;
-use imageproc::region_labelling::{connected_components, Connectivity};
+
+use super::blobs::{Blobs, Connectivity};
 
 use crate::body::Mask;
 
@@ -45,23 +45,21 @@ pub fn clean(mask: &mut Mask, opts: &CleanupOptions) {
 /// Cleans `mask` in place; a hole of which at least half the pixels are `unknown`
 /// (never seen without the person) is filled whatever its size.
 pub fn clean_with_unknown(mask: &mut Mask, opts: &CleanupOptions, unknown: Option<&Mask>) {
-    let (w, h) = (mask.width(), mask.height());
     if mask.count() == 0 {
         return;
     }
     let r = opts
         .close_radius
-        .unwrap_or_else(|| (h / 240).clamp(1, 8) as u8);
-    let gray = mask.to_gray();
-    let closed = if r == 0 {
-        gray
-    } else {
-        imageproc::morphology::close(&gray, Norm::L1, r)
-    };
-    let kept = keep_person_blobs(&closed, opts);
-    let filled = fill_holes(&kept, opts.max_hole_fraction, unknown);
-    *mask = Mask::from_gray(&filled, 128);
-    debug_assert_eq!((mask.width(), mask.height()), (w, h));
+        .unwrap_or_else(|| (mask.height() / 240).clamp(1, 8) as u8);
+    if r > 0 {
+        let closed = imageproc::morphology::close(&mask.to_gray(), Norm::L1, r);
+        *mask = Mask::from_gray(&closed, 128);
+    }
+    let blobs = Blobs::label(mask, true, Connectivity::Eight);
+    if let Some((_, keep)) = blobs.person(opts.min_blob_fraction, opts.keep_margin) {
+        *mask = blobs.mask_of(&keep);
+    }
+    fill_holes(mask, opts.max_hole_fraction, unknown);
 }
 
 /// The region a person may occupy: the cleaned mask with every hole filled, grown by
@@ -76,94 +74,36 @@ pub fn person_region(mask: &Mask, opts: &CleanupOptions, grow: u8) -> Mask {
     Mask::from_gray(&dilate(&m.to_gray(), Norm::LInf, grow), 128)
 }
 
-/// Keeps the largest blob and the sizeable blobs near it.
-fn keep_person_blobs(img: &GrayImage, opts: &CleanupOptions) -> GrayImage {
-    let labels = connected_components(img, Connectivity::Eight, Luma([0u8]));
-    let n = labels.pixels().map(|p| p.0[0]).max().unwrap_or(0) as usize;
-    if n == 0 {
-        return img.clone();
-    }
-    // Area and bounding box per label (index 0 is the background).
-    let mut area = vec![0u64; n + 1];
-    let mut bbox = vec![[u32::MAX, u32::MAX, 0u32, 0u32]; n + 1];
-    for (x, y, p) in labels.enumerate_pixels() {
-        let l = p.0[0] as usize;
-        if l == 0 {
-            continue;
-        }
-        area[l] += 1;
-        let b = &mut bbox[l];
-        b[0] = b[0].min(x);
-        b[1] = b[1].min(y);
-        b[2] = b[2].max(x);
-        b[3] = b[3].max(y);
-    }
-    let largest = (1..=n).max_by_key(|&l| area[l]).unwrap_or(1);
-    let lb = bbox[largest];
-    let margin = opts.keep_margin * (lb[3] - lb[1] + 1) as f64;
-    let keep: Vec<bool> = (0..=n)
-        .map(|l| {
-            if l == 0 {
-                return false;
-            }
-            if l == largest {
-                return true;
-            }
-            let b = bbox[l];
-            let big = area[l] as f64 >= opts.min_blob_fraction * area[largest] as f64;
-            // Gap between the two boxes along each axis.
-            let gx = (b[0] as f64 - lb[2] as f64)
-                .max(lb[0] as f64 - b[2] as f64)
-                .max(0.0);
-            let gy = (b[1] as f64 - lb[3] as f64)
-                .max(lb[1] as f64 - b[3] as f64)
-                .max(0.0);
-            big && gx.hypot(gy) <= margin
-        })
-        .collect();
-    GrayImage::from_fn(img.width(), img.height(), |x, y| {
-        Luma([if keep[labels.get_pixel(x, y).0[0] as usize] {
-            255
-        } else {
-            0
-        }])
-    })
-}
-
 /// Fills background regions that do not reach the image border and are at most
 /// `max_fraction` of the foreground's area, or mostly `unknown`.
-fn fill_holes(img: &GrayImage, max_fraction: f64, unknown: Option<&Mask>) -> GrayImage {
-    let inverted = GrayImage::from_fn(img.width(), img.height(), |x, y| {
-        Luma([if img.get_pixel(x, y).0[0] > 0 { 0 } else { 255 }])
-    });
-    let labels = connected_components(&inverted, Connectivity::Four, Luma([0u8]));
-    let n = labels.pixels().map(|p| p.0[0]).max().unwrap_or(0) as usize;
-    let mut area = vec![0u64; n + 1];
-    let mut unknown_area = vec![0u64; n + 1];
-    let mut touches_border = vec![false; n + 1];
-    let (w, h) = img.dimensions();
-    for (x, y, p) in labels.enumerate_pixels() {
-        let l = p.0[0] as usize;
-        area[l] += 1;
-        if unknown.is_some_and(|u| u.get(x, y)) {
-            unknown_area[l] += 1;
-        }
-        if x == 0 || y == 0 || x + 1 == w || y + 1 == h {
-            touches_border[l] = true;
+fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Mask>) {
+    let holes = Blobs::label(mask, false, Connectivity::Four);
+    let mut unknown_area = vec![0u64; holes.blobs.len()];
+    if let Some(u) = unknown {
+        for y in 0..mask.height() {
+            for x in 0..mask.width() {
+                if let (Some(l), true) = (holes.at(x, y), u.get(x, y)) {
+                    unknown_area[l] += 1;
+                }
+            }
         }
     }
-    let fg = img.pixels().filter(|p| p.0[0] > 0).count() as f64;
-    let fill: Vec<bool> = (0..=n)
+    let fg = mask.count() as f64;
+    let fill: Vec<bool> = (0..holes.blobs.len())
         .map(|l| {
-            l != 0
-                && !touches_border[l]
-                && ((area[l] as f64) <= max_fraction * fg || 2 * unknown_area[l] >= area[l])
+            let area = holes.blobs[l].area;
+            !holes.touches_border(l)
+                && ((area as f64) <= max_fraction * fg || 2 * unknown_area[l] >= area)
         })
         .collect();
-    GrayImage::from_fn(w, h, |x, y| {
-        let on = img.get_pixel(x, y).0[0] > 0 || fill[labels.get_pixel(x, y).0[0] as usize];
-        Luma([if on { 255 } else { 0 }])
-    })
+    let filled = holes.mask_of(&fill);
+    for y in 0..mask.height() {
+        for x in 0..mask.width() {
+            if filled.get(x, y) {
+                mask.set(x, y, true);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -211,5 +151,30 @@ mod tests {
         let mut empty = Mask::new(10, 10);
         clean(&mut empty, &CleanupOptions::default());
         assert_eq!(empty.count(), 0);
+    }
+}
+
+#[cfg(test)]
+mod degenerate {
+    use super::*;
+
+    /// Noise can make every background pixel its own region (imageproc's labelling
+    /// panicked on this).
+    #[test]
+    fn checkerboard_and_tiny_masks_do_not_panic() {
+        for (w, h) in [(1, 1), (2, 2), (5, 3), (64, 48)] {
+            let mut m = Mask::new(w, h);
+            for y in 0..h {
+                for x in 0..w {
+                    m.set(x, y, (x + y) % 2 == 0);
+                }
+            }
+            clean(&mut m, &CleanupOptions::default());
+            let mut full = Mask::new(w, h);
+            for y in 0..h {
+                full.fill_span(y, 0, w - 1);
+            }
+            clean(&mut full, &CleanupOptions::default());
+        }
     }
 }

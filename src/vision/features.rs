@@ -24,12 +24,13 @@
 //!   is the apex of the background gap between the legs; the region image R holds the
 //!   arms (thin parts below the neck) and the legs (below the crotch).
 
-use image::{GrayImage, Luma, Rgb, RgbImage};
+use image::{Rgb, RgbImage};
 use imageproc::contours::{find_contours, BorderType};
 use imageproc::drawing::{
     draw_cross_mut, draw_filled_circle_mut, draw_hollow_circle_mut, draw_line_segment_mut,
 };
 
+use super::blobs::{Blobs, Connectivity};
 use crate::body::Mask;
 
 /// Tuning of [`compute`]. Lengths given as a fraction of the body height are relative
@@ -399,45 +400,19 @@ fn edge_map(
 /// The person's blobs and their outer contours (the largest blob's first).
 fn select_person(s: &Mask, opts: &FeatureOptions) -> (Mask, Vec<Vec<[i32; 2]>>) {
     let (w, h) = (s.width(), s.height());
-    let (labels, stats) = label_blobs(s);
-    let Some(main) = (0..stats.len()).max_by_key(|&i| (stats[i].0, std::cmp::Reverse(i))) else {
+    let blobs = Blobs::label(s, true, Connectivity::Eight);
+    let Some((main, keep)) = blobs.person(opts.min_blob_fraction, opts.blob_gap) else {
         return (Mask::new(w, h), Vec::new());
     };
-    let (marea, mb) = stats[main];
-    let gap = opts.blob_gap * (mb[3] - mb[1] + 1) as f64;
-    let keep: Vec<bool> = stats
-        .iter()
-        .enumerate()
-        .map(|(i, (area, b))| {
-            if i == main {
-                return true;
-            }
-            let dx = (b[0] as f64 - mb[2] as f64)
-                .max(mb[0] as f64 - b[2] as f64)
-                .max(0.0);
-            let dy = (b[1] as f64 - mb[3] as f64)
-                .max(mb[1] as f64 - b[3] as f64)
-                .max(0.0);
-            (*area as f64) >= opts.min_blob_fraction * marea as f64 && dx.hypot(dy) <= gap
-        })
-        .collect();
-    let mut person = Mask::new(w, h);
-    let mut pgray = GrayImage::new(w, h);
-    for (i, &l) in labels.iter().enumerate() {
-        let (x, y) = (i as u32 % w, i as u32 / w);
-        let l = l as usize;
-        if l > 0 && keep[l - 1] {
-            person.set(x, y, true);
-            pgray.put_pixel(x, y, Luma([255]));
-        }
-    }
+    let person = blobs.mask_of(&keep);
+    let pgray = person.to_gray();
     let mut contours: Vec<Vec<[i32; 2]>> = Vec::new();
     for c in find_contours::<i32>(&pgray) {
         if c.border_type != BorderType::Outer || c.parent.is_some() || c.points.is_empty() {
             continue;
         }
         let p0 = c.points[0];
-        let is_main = labels[(p0.y as u32 * w + p0.x as u32) as usize] as usize == main + 1;
+        let is_main = blobs.at(p0.x as u32, p0.y as u32) == Some(main);
         let pts: Vec<[i32; 2]> = c.points.iter().map(|p| [p.x, p.y]).collect();
         if is_main {
             contours.insert(0, pts);
@@ -446,48 +421,6 @@ fn select_person(s: &Mask, opts: &FeatureOptions) -> (Mask, Vec<Vec<[i32; 2]>>) 
         }
     }
     (person, contours)
-}
-
-/// 8-connected blobs: a label per pixel (0 background, blobs from 1) and, per blob,
-/// its area and inclusive bounding box. (imageproc's `connected_components` 0.25
-/// panics on an image whose every pixel is its own blob, e.g. 1×1.)
-#[allow(clippy::type_complexity)]
-fn label_blobs(s: &Mask) -> (Vec<u32>, Vec<(u64, [u32; 4])>) {
-    let (w, h) = (s.width(), s.height());
-    let mut labels = vec![0u32; (w * h) as usize];
-    let mut stats = Vec::new();
-    let mut stack = Vec::new();
-    for y0 in 0..h {
-        for x0 in 0..w {
-            if labels[(y0 * w + x0) as usize] != 0 || !s.get(x0, y0) {
-                continue;
-            }
-            let label = stats.len() as u32 + 1;
-            let mut st = (0u64, [x0, y0, x0, y0]);
-            labels[(y0 * w + x0) as usize] = label;
-            stack.push((x0, y0));
-            while let Some((x, y)) = stack.pop() {
-                st.0 += 1;
-                st.1 = [
-                    st.1[0].min(x),
-                    st.1[1].min(y),
-                    st.1[2].max(x),
-                    st.1[3].max(y),
-                ];
-                for ny in y.saturating_sub(1)..=(y + 1).min(h - 1) {
-                    for nx in x.saturating_sub(1)..=(x + 1).min(w - 1) {
-                        let i = (ny * w + nx) as usize;
-                        if labels[i] == 0 && s.get(nx, ny) {
-                            labels[i] = label;
-                            stack.push((nx, ny));
-                        }
-                    }
-                }
-            }
-            stats.push(st);
-        }
-    }
-    (labels, stats)
 }
 
 fn bounding_box(m: &Mask) -> Option<[u32; 4]> {

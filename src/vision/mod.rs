@@ -2,6 +2,7 @@
 //! objective needs (§4): coremap, edge map, outline features.
 
 pub mod background;
+pub mod blobs;
 pub mod cleanup;
 pub mod features;
 pub mod silhouette;
