@@ -330,3 +330,28 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
         "extension",
     );
 }
+
+#[test]
+fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
+    let dir = TempDir::new("tiny");
+    // Tiny frames are legal: they must render, not panic.
+    for (w, h) in [("3", "3"), ("1", "2"), ("2", "1")] {
+        let out = dir.join(&format!("tiny_{w}x{h}.y4m"));
+        let res = synth(&out, &["--width", w, "--height", h, "--duration-s", "0.2"]);
+        assert_success(&format!("synth {w}×{h}"), &res);
+    }
+    let clip = dir.join("clip.y4m");
+    assert_success("synth", &synth(&clip, &["--empty-frames", "4"]));
+    assert_fails_with(
+        "person-free range past the end",
+        &monocap(&[
+            "silhouettes",
+            s(&clip),
+            "-o",
+            s(&dir.join("m.zip")),
+            "--empty-frames",
+            "5..200",
+        ]),
+        "run past the clip",
+    );
+}

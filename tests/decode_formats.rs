@@ -966,6 +966,7 @@ fn fuzz_limits() -> Limits {
     Limits {
         max_width: 256,
         max_height: 256,
+        max_pixels: 256 * 256,
         max_frames: 64,
         max_entry_bytes: 1 << 20,
         max_total_bytes: 8 << 20,

@@ -176,21 +176,31 @@ fn median_iou(frames: &[RgbImage], truth: &[Option<Mask>]) -> f64 {
 /// the scene behind a pixel is learned only from frames in which the person has
 /// moved off it: lucia's torso covers a quarter of her area in every frame (the
 /// camera follows her), and in these 3-second synthetic clips the performer stays
-/// on the same spot. Their figures are printed, not asserted.
-const KNOWN_SHORT: [&str; 4] = [
-    "lucia with 0 person-free frames",
-    "cmu_131_01.bvh with 0 person-free frames",
-    "bandai_kick_normal_001.bvh with 0 person-free frames",
-    "bandai_dance-short_normal_001.bvh with 0 person-free frames",
+/// on the same spot.
+/// Each with a floor a little under its current figure (0.734, 0.733, 0.663, 0.012)
+/// so that it cannot silently get worse.
+const KNOWN_SHORT: [(&str, f64); 4] = [
+    ("lucia with 0 person-free frames", 0.70),
+    ("cmu_131_01.bvh with 0 person-free frames", 0.68),
+    ("bandai_kick_normal_001.bvh with 0 person-free frames", 0.61),
+    (
+        "bandai_dance-short_normal_001.bvh with 0 person-free frames",
+        0.0,
+    ),
 ];
 
-/// Fails listing every result under its target (after all were printed).
+/// Fails listing every result under its target, or under its floor for the known
+/// shortfalls (after all were printed).
 fn check(results: &[(String, f64, f64)]) {
     let short: Vec<String> = results
         .iter()
-        .filter(|(what, _, _)| !KNOWN_SHORT.contains(&what.as_str()))
-        .filter(|(_, iou, target)| iou < target)
-        .map(|(what, iou, target)| format!("{what}: {iou:.3} < {target}"))
+        .filter_map(|(what, iou, target)| {
+            let need = KNOWN_SHORT
+                .iter()
+                .find(|(k, _)| *k == what.as_str())
+                .map_or(*target, |(_, floor)| *floor);
+            (!(iou.is_finite() && *iou >= need)).then(|| format!("{what}: {iou:.3} < {need}"))
+        })
         .collect();
     assert!(short.is_empty(), "below target: {}", short.join("; "));
 }

@@ -592,3 +592,27 @@ fn synthesize_rejects_bad_options_with_a_message() {
         assert!(!out.exists(), "{what}: {} was written", out.display());
     }
 }
+
+/// A capture whose Frame Time is absurdly small has an absurdly large step between
+/// clip frames: only the first frame exists, and nothing overflows.
+#[test]
+fn a_tiny_frame_time_picks_one_frame_without_overflow() {
+    let text = std::fs::read_to_string(FIXTURE).unwrap();
+    let line = text.lines().find(|l| l.starts_with("Frame Time")).unwrap();
+    let tiny = text.replacen(line, "Frame Time: 1e-300", 1);
+    let bvh = Bvh::parse(&tiny).unwrap();
+    let opts = SynthOptions {
+        first_frame: 1,
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let mut frames = 0;
+    let truth = monocap::synth::synthesize_with(&bvh, "tiny.bvh", &opts, |_| {
+        frames += 1;
+        Ok(())
+    })
+    .unwrap();
+    assert_eq!(frames, 1);
+    assert_eq!(truth.frames.len(), 1);
+    assert_eq!(truth.frames[0].source_frame, 1);
+}

@@ -370,7 +370,10 @@ fn cylinder_interval(o: &Vector3<f64>, d: &Vector3<f64>) -> Option<(f64, f64)> {
 }
 
 /// Draws the silhouette of `body` in pose `posed` seen by `cam` into `mask` (which is
-/// cleared first and must have the camera's size). Allocation-free.
+/// cleared first). Allocation-free.
+///
+/// # Panics
+/// When `mask` is not the camera's size.
 pub fn render_mask(body: &Body, posed: &Posed, cam: &Camera, mask: &mut Mask) {
     assert!(
         mask.width == cam.width && mask.height == cam.height,
@@ -472,6 +475,9 @@ impl Fragments {
 }
 
 /// Depth-tested render of the visible surface (for colour clips and previews).
+///
+/// # Panics
+/// When `out` is not the camera's size.
 pub fn render_fragments(body: &Body, posed: &Posed, cam: &Camera, out: &mut Fragments) {
     assert!(out.width == cam.width && out.height == cam.height);
     out.depth.fill(f32::INFINITY);

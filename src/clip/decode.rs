@@ -34,6 +34,10 @@ pub struct ClipInfo {
 pub struct Limits {
     pub max_width: u32,
     pub max_height: u32,
+    /// Most pixels a frame may have (width × height): per-pixel models downstream
+    /// (the background model keeps about 130 bytes a pixel, twice that while it
+    /// finishes) must fit in memory.
+    pub max_pixels: u64,
     /// Most frames a clip may have.
     pub max_frames: u64,
     /// Most bytes one archive entry may inflate to.
@@ -47,6 +51,7 @@ impl Default for Limits {
         Limits {
             max_width: 4096,
             max_height: 4096,
+            max_pixels: 3840 * 2160,
             max_frames: 100_000,
             max_entry_bytes: 64 << 20,
             max_total_bytes: 8 << 30,
@@ -57,12 +62,17 @@ impl Default for Limits {
 impl Limits {
     /// Refuses a frame size over the limits (before anything of that size is allocated).
     pub fn check_size(&self, path: &Path, width: u32, height: u32) -> Result<(), DecodeError> {
-        if width == 0 || height == 0 || width > self.max_width || height > self.max_height {
+        if width == 0
+            || height == 0
+            || width > self.max_width
+            || height > self.max_height
+            || width as u64 * height as u64 > self.max_pixels
+        {
             return Err(DecodeError::TooLarge {
                 path: path.to_path_buf(),
                 what: format!(
-                    "frame size {width}×{height} (the limit is {}×{}, and neither side may be 0)",
-                    self.max_width, self.max_height
+                    "frame size {width}×{height} (the limit is {}×{} and {} pixels, and neither side may be 0)",
+                    self.max_width, self.max_height, self.max_pixels
                 ),
             });
         }

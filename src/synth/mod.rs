@@ -369,10 +369,13 @@ fn pick_frames(bvh: &Bvh, opts: &SynthOptions) -> Result<Vec<usize>> {
         Some(d) => ((d * opts.fps).round() as usize).max(1),
         None => usize::MAX,
     };
+    // In floating point until the frame is known to exist: a tiny Frame Time makes
+    // the step huge.
     let frames: Vec<usize> = (0..)
-        .map(|k| opts.first_frame + (k as f64 * step).round() as usize)
-        .take_while(|&f| f < n)
+        .map(|k| (opts.first_frame as f64 + k as f64 * step).round())
+        .take_while(|&f| f < n as f64)
         .take(limit.min(MAX_FRAMES))
+        .map(|f| f as usize)
         .collect();
     Ok(frames)
 }
@@ -611,8 +614,9 @@ fn make_background(
     });
     // Panels on the wall.
     for _ in 0..4 {
-        let w = rng.random_range(width / 10..width / 4).max(1);
-        let h = rng.random_range(height / 10..height / 4).max(1);
+        // Panels a tenth to a quarter of the image (at least a pixel, however small).
+        let w = rng.random_range((width / 10).max(1)..(width / 4).max(2));
+        let h = rng.random_range((height / 10).max(1)..(height / 4).max(2));
         let x0 = rng.random_range(0..width.saturating_sub(w).max(1));
         let y0 = rng.random_range(0..(horizon as u32).saturating_sub(h).max(1));
         let colour: [f64; 3] = [

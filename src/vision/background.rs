@@ -18,7 +18,10 @@
 //!   (lucia, dance-twirl, tennis) and this model 0.734 / 0.933 / 0.907
 //!   (`tests/silhouette_quality.rs` measures both).
 //!
-//! Memory: about 120 bytes per pixel (40 MB at 854×480), whatever the clip's length.
+//! Memory, whatever the clip's length: about 130 bytes a pixel while learning (32
+//! samples of 3 bytes, running statistics of the person-free frames, the first
+//! frame), at most about as much again while a whole-clip model finishes: 53 MB at
+//! 854×480, some 2 GB at the 3840×2160 cap of [`crate::clip::Limits`].
 
 use image::RgbImage;
 
@@ -179,7 +182,11 @@ impl BackgroundBuilder {
         }
     }
 
-    /// Adds the next frame (all frames must have the builder's size).
+    /// Adds the next frame.
+    ///
+    /// # Panics
+    /// When the frame's size is not the builder's (callers check decoded frames; see
+    /// [`crate::vision::silhouette::clip_silhouettes`]).
     pub fn push(&mut self, frame: &RgbImage) {
         assert_eq!(
             (frame.width(), frame.height()),
@@ -243,13 +250,6 @@ impl BackgroundBuilder {
     /// The model: from the person-free frames when there are enough of them (and,
     /// when found automatically, they agree with the clip), else from the clusters.
     pub fn finish(self) -> BackgroundModel {
-        let clusters: Vec<[Cluster; K]> = self
-            .samples
-            .chunks(SAMPLES)
-            .map(|px| cluster_samples(&px[..self.kept]))
-            .collect();
-        let (mean, mut sigma) = dominant_scene(&clusters, self.width, self.height, self.kept);
-        cap_sigma(&mut sigma);
         let usable = match self.empty {
             EmptyFrames::None => false,
             EmptyFrames::Range(..) => self.still_count >= 1,
@@ -277,14 +277,31 @@ impl BackgroundBuilder {
                 unknown: None,
             };
         }
+        let BackgroundBuilder {
+            width,
+            height,
+            frames,
+            samples,
+            kept,
+            still,
+            first,
+            ..
+        } = self;
+        // Free what the whole-clip model does not need before clustering.
+        drop((still, first));
+        let clusters: Vec<[Cluster; K]> = samples
+            .chunks(SAMPLES)
+            .map(|px| cluster_samples(&px[..kept]))
+            .collect();
+        drop(samples);
+        let (mean, mut sigma) = dominant_scene(&clusters, width, height, kept);
+        cap_sigma(&mut sigma);
         BackgroundModel {
-            width: self.width,
-            height: self.height,
+            width,
+            height,
             mean,
             sigma,
-            source: ModelSource::WholeClip {
-                frames: self.frames,
-            },
+            source: ModelSource::WholeClip { frames },
             unknown: None,
         }
     }
@@ -506,6 +523,9 @@ fn changed_fraction(first: &RgbImage, frame: &RgbImage) -> f32 {
 
 impl BackgroundModel {
     /// Marks the foreground pixels of `frame` in `out` (cleared first).
+    ///
+    /// # Panics
+    /// When `frame` or `out` is not the model's size.
     pub fn foreground(&self, frame: &RgbImage, opts: &BackgroundOptions, out: &mut Mask) {
         assert_eq!(
             (frame.width(), frame.height()),

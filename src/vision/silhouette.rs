@@ -1,6 +1,6 @@
 //! Silhouettes of a clip: learn the background in a first pass over the frames,
 //! then segment and clean each frame in a second pass (method.md §3). Both passes
-//! stream: between them only the background model is kept (about 110 bytes a pixel),
+//! stream: between them only the background model is kept (see its memory note),
 //! never the frames. A clip of masks skips background subtraction: its frames are
 //! thresholded as they are.
 
@@ -110,6 +110,15 @@ pub fn clip_silhouettes(
 ) -> anyhow::Result<ClipSilhouettes> {
     use crate::clip::open::{open, open_with, probe};
     let info = probe(path, limits)?;
+    if let super::background::EmptyFrames::Range(a, b) = opts.background.empty {
+        if info.frame_count > 0 && b as u64 > info.frame_count {
+            anyhow::bail!(
+                "{}: person-free frames {a}..{b} run past the clip's {} frames",
+                path.display(),
+                info.frame_count
+            );
+        }
+    }
     let (w, h) = (info.width, info.height);
     let size_check = |f: &RgbImage| -> anyhow::Result<()> {
         if f.dimensions() != (w, h) {
