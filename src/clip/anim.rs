@@ -27,6 +27,11 @@ use image::{AnimationDecoder, ImageDecoder, ImageError, RgbImage, RgbaImage};
 
 use super::decode::{ClipInfo, DecodeError, FrameSource, Limits};
 
+/// An I/O error, or `Truncated` when the file ended early.
+fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
+    DecodeError::io_or_truncated(path, source, "the file is cut off")
+}
+
 /// Which image format a file holds.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum AnimKind {
@@ -47,26 +52,6 @@ struct Walk {
     /// Frame delays in seconds (empty for stills).
     delays: Vec<f64>,
     animated: bool,
-}
-
-fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
-    if source.kind() == std::io::ErrorKind::UnexpectedEof {
-        return DecodeError::Truncated {
-            path: path.to_path_buf(),
-            what: "the file is cut off".into(),
-        };
-    }
-    DecodeError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
-fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Corrupt {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
 }
 
 fn read_arr<const N: usize, R: Read>(r: &mut R) -> std::io::Result<[u8; N]> {
@@ -91,7 +76,7 @@ fn walk_gif(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
     let io = |e| io_err(path, e);
     let head: [u8; 13] = read_arr(r).map_err(io)?;
     if &head[..3] != b"GIF" {
-        return Err(corrupt(path, "no GIF signature"));
+        return Err(DecodeError::corrupt(path, "no GIF signature"));
     }
     let width = u32::from(u16::from_le_bytes([head[6], head[7]]));
     let height = u32::from(u16::from_le_bytes([head[8], head[9]]));
@@ -124,7 +109,7 @@ fn walk_gif(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
                 if label == 0xF9 {
                     let gce: [u8; 6] = read_arr(r).map_err(io)?;
                     if gce[0] != 4 || gce[5] != 0 {
-                        return Err(corrupt(path, "bad graphic control extension"));
+                        return Err(DecodeError::corrupt(path, "bad graphic control extension"));
                     }
                     let cs = u16::from_le_bytes([gce[2], gce[3]]);
                     pending_delay = f64::from(if cs == 0 { 10 } else { cs }) / 100.0;
@@ -158,11 +143,16 @@ fn walk_gif(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
                     return Err(too_many(path, limits));
                 }
             }
-            other => return Err(corrupt(path, format!("unknown GIF block 0x{other:02x}"))),
+            other => {
+                return Err(DecodeError::corrupt(
+                    path,
+                    format!("unknown GIF block 0x{other:02x}"),
+                ))
+            }
         }
     }
     if delays.is_empty() {
-        return Err(corrupt(path, "the GIF has no frames"));
+        return Err(DecodeError::corrupt(path, "the GIF has no frames"));
     }
     Ok(Walk {
         width,
@@ -178,7 +168,7 @@ fn walk_png(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
     let io = |e| io_err(path, e);
     let sig: [u8; 8] = read_arr(r).map_err(io)?;
     if &sig != b"\x89PNG\r\n\x1a\n" {
-        return Err(corrupt(path, "no PNG signature"));
+        return Err(DecodeError::corrupt(path, "no PNG signature"));
     }
     let (mut width, mut height) = (0, 0);
     let mut animated = false;
@@ -200,7 +190,7 @@ fn walk_png(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
         let kind = [head[4], head[5], head[6], head[7]];
         if first {
             if &kind != b"IHDR" || len < 8 {
-                return Err(corrupt(path, "PNG does not start with IHDR"));
+                return Err(DecodeError::corrupt(path, "PNG does not start with IHDR"));
             }
             let ihdr: [u8; 8] = read_arr(r).map_err(io)?;
             width = u32::from_be_bytes([ihdr[0], ihdr[1], ihdr[2], ihdr[3]]);
@@ -241,7 +231,10 @@ fn walk_png(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wal
         });
     }
     if delays.is_empty() {
-        return Err(corrupt(path, "APNG without frame control chunks"));
+        return Err(DecodeError::corrupt(
+            path,
+            "APNG without frame control chunks",
+        ));
     }
     Ok(Walk {
         width,
@@ -261,7 +254,7 @@ fn walk_webp(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wa
     let io = |e| io_err(path, e);
     let riff: [u8; 12] = read_arr(r).map_err(io)?;
     if &riff[..4] != b"RIFF" || &riff[8..] != b"WEBP" {
-        return Err(corrupt(path, "no WebP signature"));
+        return Err(DecodeError::corrupt(path, "no WebP signature"));
     }
     let mut size: Option<(u32, u32)> = None;
     let mut animated = false;
@@ -288,7 +281,7 @@ fn walk_webp(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wa
                 let v: [u8; 10] = read_arr(r).map_err(io)?;
                 consumed = 10;
                 if v[3..6] != [0x9d, 0x01, 0x2a] {
-                    return Err(corrupt(path, "bad VP8 start code"));
+                    return Err(DecodeError::corrupt(path, "bad VP8 start code"));
                 }
                 let w = u32::from(u16::from_le_bytes([v[6], v[7]]) & 0x3fff);
                 let h = u32::from(u16::from_le_bytes([v[8], v[9]]) & 0x3fff);
@@ -299,7 +292,7 @@ fn walk_webp(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wa
                 let v: [u8; 5] = read_arr(r).map_err(io)?;
                 consumed = 5;
                 if v[0] != 0x2f {
-                    return Err(corrupt(path, "bad VP8L signature"));
+                    return Err(DecodeError::corrupt(path, "bad VP8L signature"));
                 }
                 let bits = u32::from_le_bytes([v[1], v[2], v[3], v[4]]);
                 let (w, h) = ((bits & 0x3fff) + 1, ((bits >> 14) & 0x3fff) + 1);
@@ -325,9 +318,10 @@ fn walk_webp(r: &mut BufReader<File>, path: &Path, limits: &Limits) -> Result<Wa
             Err(e) => return Err(io_err(path, e)),
         }
     }
-    let (width, height) = size.ok_or_else(|| corrupt(path, "WebP without an image chunk"))?;
+    let (width, height) =
+        size.ok_or_else(|| DecodeError::corrupt(path, "WebP without an image chunk"))?;
     if animated && delays.is_empty() {
-        return Err(corrupt(path, "animated WebP without frames"));
+        return Err(DecodeError::corrupt(path, "animated WebP without frames"));
     }
     Ok(Walk {
         width,
@@ -620,7 +614,10 @@ impl AnimSource {
         self.rx = None;
         if let Some(h) = self.handle.take() {
             if h.join().is_err() {
-                return Err(corrupt(&self.path, "the image decoder failed (panicked)"));
+                return Err(DecodeError::corrupt(
+                    &self.path,
+                    "the image decoder failed (panicked)",
+                ));
             }
         }
         Ok(None)
@@ -645,7 +642,7 @@ impl FrameSource for AnimSource {
             Ok(Ok(frame)) => {
                 if frame.dimensions() != (self.info.width, self.info.height) {
                     self.rx = None;
-                    return Err(corrupt(
+                    return Err(DecodeError::corrupt(
                         &self.path,
                         format!(
                             "frame {} is {}×{}, the canvas {}×{}",

@@ -36,6 +36,11 @@ use image::{ImageFormat, RgbImage};
 use super::anim::{image_err, jpeg_complete};
 use super::decode::{ClipInfo, DecodeError, FrameSource, Limits};
 
+/// An I/O error, or `Truncated` when the file ended early.
+fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
+    DecodeError::io_or_truncated(path, source, "the archive ends inside an entry")
+}
+
 /// Which archive format.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ArchiveKind {
@@ -95,26 +100,6 @@ pub fn natural_cmp(a: &str, b: &str) -> Ordering {
     }
 }
 
-fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Corrupt {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
-fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
-    if source.kind() == std::io::ErrorKind::UnexpectedEof {
-        return DecodeError::Truncated {
-            path: path.to_path_buf(),
-            what: "the archive ends inside an entry".into(),
-        };
-    }
-    DecodeError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
 /// Refuses names that would escape a directory if extracted.
 fn check_name(path: &Path, name: &str) -> Result<(), DecodeError> {
     let bytes = name.as_bytes();
@@ -125,7 +110,7 @@ fn check_name(path: &Path, name: &str) -> Result<(), DecodeError> {
         || drive
         || name.split('/').any(|c| c == "..");
     if bad {
-        return Err(corrupt(
+        return Err(DecodeError::corrupt(
             path,
             format!("unsafe entry name {name:?} (absolute, `..` or backslash): archive refused"),
         ));
@@ -235,8 +220,8 @@ fn index_tar(
         if block.iter().all(|&b| b == 0) {
             break;
         }
-        let stored =
-            tar_number(&block[148..156]).ok_or_else(|| corrupt(path, "bad tar checksum field"))?;
+        let stored = tar_number(&block[148..156])
+            .ok_or_else(|| DecodeError::corrupt(path, "bad tar checksum field"))?;
         let sum: u64 = block
             .iter()
             .enumerate()
@@ -249,13 +234,13 @@ fn index_tar(
             })
             .sum();
         if sum != stored {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("tar header at byte {} has a bad checksum", offset - 512),
             ));
         }
-        let mut size =
-            tar_number(&block[124..136]).ok_or_else(|| corrupt(path, "bad tar size field"))?;
+        let mut size = tar_number(&block[124..136])
+            .ok_or_else(|| DecodeError::corrupt(path, "bad tar size field"))?;
         if let Some(s) = pax_size.take() {
             size = s;
         }
@@ -263,7 +248,7 @@ fn index_tar(
         let padded = size
             .div_ceil(512)
             .checked_mul(512)
-            .ok_or_else(|| corrupt(path, "bad tar size"))?;
+            .ok_or_else(|| DecodeError::corrupt(path, "bad tar size"))?;
         if data_at.saturating_add(size) > file_len {
             return Err(DecodeError::Truncated {
                 path: path.to_path_buf(),
@@ -402,7 +387,7 @@ fn zip_err(path: &Path, e: zip::result::ZipError) -> DecodeError {
             container: "zip".into(),
             codec: what.to_string(),
         },
-        other => corrupt(path, other.to_string()),
+        other => DecodeError::corrupt(path, other.to_string()),
     }
 }
 
@@ -429,7 +414,7 @@ fn read_entry(
                 if e.kind() == std::io::ErrorKind::InvalidData
                     || e.kind() == std::io::ErrorKind::Other
                 {
-                    corrupt(path, format!("entry {:?}: {e}", entry.name))
+                    DecodeError::corrupt(path, format!("entry {:?}: {e}", entry.name))
                 } else {
                     io_err(path, e)
                 }
@@ -481,7 +466,7 @@ fn decode_image(
         Some(ImageFormat::Png) => "png",
         Some(ImageFormat::Jpeg) => "jpeg",
         _ => {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("entry {name:?} is neither PNG nor JPEG"),
             ))
@@ -547,7 +532,7 @@ impl ArchiveSource {
         let (img, codec) = decode_image(&bytes, &entry.name, &self.path, &self.limits)?;
         drop(bytes);
         if i > 0 && img.dimensions() != (self.info.width, self.info.height) {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 &self.path,
                 format!(
                     "mixed frame sizes: {:?} is {}×{}, the first frame {}×{}",
@@ -580,13 +565,14 @@ impl ArchiveSource {
                     read_up_to(r.by_ref().take(entry.size), &mut head)
                 }
             };
-            let got =
-                got.map_err(|e| corrupt(&self.path, format!("entry {:?}: {e}", entry.name)))?;
+            let got = got.map_err(|e| {
+                DecodeError::corrupt(&self.path, format!("entry {:?}: {e}", entry.name))
+            })?;
             if got == 24 && head.starts_with(b"\x89PNG\r\n\x1a\n") && &head[12..16] == b"IHDR" {
                 let w = u32::from_be_bytes([head[16], head[17], head[18], head[19]]);
                 let h = u32::from_be_bytes([head[20], head[21], head[22], head[23]]);
                 if (w, h) != (self.info.width, self.info.height) {
-                    return Err(corrupt(
+                    return Err(DecodeError::corrupt(
                         &self.path,
                         format!(
                             "mixed frame sizes: {:?} is {w}×{h}, the first frame {}×{}",

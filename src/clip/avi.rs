@@ -26,6 +26,11 @@ use super::h264::{is_annex_b, H264Decoder};
 use super::mp4::h264_error;
 use super::{ClipInfo, DecodeError, FrameSource, Limits};
 
+/// An I/O error, or `Truncated` when the file ended early.
+fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
+    DecodeError::io_or_truncated(path, source, "a chunk is cut off")
+}
+
 /// Largest `hdrl` list read into memory.
 const MAX_HEADER_BYTES: u32 = 4 << 20;
 /// Largest single video chunk (one compressed frame).
@@ -83,31 +88,6 @@ struct Demuxed {
     extradata: Vec<u8>,
 }
 
-fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Corrupt {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
-fn truncated(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Truncated {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
-fn io_err(path: &Path, e: std::io::Error) -> DecodeError {
-    if e.kind() == std::io::ErrorKind::UnexpectedEof {
-        truncated(path, "a chunk is cut off")
-    } else {
-        DecodeError::Io {
-            path: path.to_path_buf(),
-            source: e,
-        }
-    }
-}
-
 fn u32_at(b: &[u8], at: usize) -> Option<u32> {
     b.get(at..at + 4)
         .map(|s| u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
@@ -128,7 +108,7 @@ fn sub_chunks<'a>(path: &Path, mut b: &'a [u8]) -> Result<Vec<Chunk<'a>>, Decode
         let id = fourcc_at(b, 0).unwrap_or_default();
         let size = u32_at(b, 4).unwrap_or_default() as usize;
         let Some(data) = b.get(8..8 + size) else {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("{} chunk of {size} bytes overruns its list", show(&id)),
             ));
@@ -190,7 +170,10 @@ fn parse_hdrl(path: &Path, hdrl: &[u8]) -> Result<VideoStream, DecodeError> {
             continue;
         }
         let Some(strf) = strf else {
-            return Err(corrupt(path, "video stream without a format (strf)"));
+            return Err(DecodeError::corrupt(
+                path,
+                "video stream without a format (strf)",
+            ));
         };
         let handler = fourcc_at(strh, 4).unwrap_or_default();
         let scale = u32_at(strh, 20).unwrap_or(0);
@@ -200,7 +183,10 @@ fn parse_hdrl(path: &Path, hdrl: &[u8]) -> Result<VideoStream, DecodeError> {
         let (Some(w), Some(h), Some(compression)) =
             (u32_at(strf, 4), u32_at(strf, 8), fourcc_at(strf, 16))
         else {
-            return Err(corrupt(path, "video format (strf) is too short"));
+            return Err(DecodeError::corrupt(
+                path,
+                "video format (strf) is too short",
+            ));
         };
         let width = w as i32;
         let height = h as i32;
@@ -221,7 +207,10 @@ fn parse_hdrl(path: &Path, hdrl: &[u8]) -> Result<VideoStream, DecodeError> {
             extradata: strf.get(40..).unwrap_or_default().to_vec(),
         });
     }
-    Err(corrupt(path, "no video stream in the AVI header"))
+    Err(DecodeError::corrupt(
+        path,
+        "no video stream in the AVI header",
+    ))
 }
 
 fn codec_name(s: &VideoStream) -> String {
@@ -270,7 +259,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
     while let Some(&end) = stack.last() {
         if pos + 8 > end {
             if pos < end && end == len {
-                return Err(truncated(
+                return Err(DecodeError::truncated(
                     path,
                     format!("chunk header cut off at byte {pos}"),
                 ));
@@ -293,7 +282,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
         if &id == b"RIFF" || &id == b"LIST" {
             let mut kind = [0u8; 4];
             if size < 4 || data_start + 4 > len {
-                return Err(truncated(
+                return Err(DecodeError::truncated(
                     path,
                     format!("{} list at byte {pos} is cut off", show(&id)),
                 ));
@@ -305,10 +294,16 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
             match &kind {
                 b"hdrl" => {
                     if data_end > end {
-                        return Err(truncated(path, "the AVI header list (hdrl) is cut off"));
+                        return Err(DecodeError::truncated(
+                            path,
+                            "the AVI header list (hdrl) is cut off",
+                        ));
                     }
                     if size > MAX_HEADER_BYTES {
-                        return Err(corrupt(path, format!("AVI header list of {size} bytes")));
+                        return Err(DecodeError::corrupt(
+                            path,
+                            format!("AVI header list of {size} bytes"),
+                        ));
                     }
                     let mut b = vec![0u8; size as usize - 4];
                     r.read_exact(&mut b).map_err(|e| io_err(path, e))?;
@@ -321,7 +316,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
                     if &kind == b"movi" {
                         saw_movi = true;
                         if data_end > len {
-                            return Err(truncated(
+                            return Err(DecodeError::truncated(
                                 path,
                                 format!(
                                     "movi list declares {size} bytes, {} are in the file",
@@ -340,7 +335,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
         }
         if data_end > end {
             if in_movi_depth.is_some() || end == len {
-                return Err(truncated(
+                return Err(DecodeError::truncated(
                     path,
                     format!(
                         "{} chunk at byte {pos} declares {size} bytes, {} are left",
@@ -349,7 +344,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
                     ),
                 ));
             }
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("{} chunk at byte {pos} overruns its list", show(&id)),
             ));
@@ -359,7 +354,10 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
                 let want = format!("{:02}", s.index);
                 if id[0..2] == *want.as_bytes() && (&id[2..4] == b"dc" || &id[2..4] == b"db") {
                     if size > MAX_CHUNK_BYTES {
-                        return Err(corrupt(path, format!("video chunk of {size} bytes")));
+                        return Err(DecodeError::corrupt(
+                            path,
+                            format!("video chunk of {size} bytes"),
+                        ));
                     }
                     chunks.push((data_start, size));
                     if chunks.len() as u64 > limits.max_frames {
@@ -377,20 +375,23 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
     let Some(stream) = stream else {
         let declared = u64::from(u32::from_le_bytes([head[4], head[5], head[6], head[7]])) + 8;
         return Err(if declared > len {
-            truncated(
+            DecodeError::truncated(
                 path,
                 format!("no AVI header list (hdrl) in the {len} bytes of a {declared}-byte RIFF"),
             )
         } else {
-            corrupt(path, "no AVI header list (hdrl)")
+            DecodeError::corrupt(path, "no AVI header list (hdrl)")
         });
     };
     if !saw_movi {
-        return Err(truncated(path, "no movi list (the frames) in the file"));
+        return Err(DecodeError::truncated(
+            path,
+            "no movi list (the frames) in the file",
+        ));
     }
     limits.check_size(path, stream.width, stream.height)?;
     if chunks.is_empty() {
-        return Err(corrupt(path, "the video stream has no frames"));
+        return Err(DecodeError::corrupt(path, "the video stream has no frames"));
     }
     let codec = codec_name(&stream);
     let frame_count = chunks.len() as u64;
@@ -442,7 +443,7 @@ impl AviSource {
     fn decode_jpeg(&self) -> Result<RgbImage, DecodeError> {
         use image::ImageDecoder;
         let bad = |e: image::ImageError| {
-            corrupt(&self.path, format!("JPEG frame {}: {e}", self.next - 1))
+            DecodeError::corrupt(&self.path, format!("JPEG frame {}: {e}", self.next - 1))
         };
         let dec =
             image::codecs::jpeg::JpegDecoder::new(std::io::Cursor::new(&self.buf)).map_err(bad)?;
@@ -451,7 +452,7 @@ impl AviSource {
             || h > self.max_height
             || (w, h) != (self.info.width, self.info.height)
         {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 &self.path,
                 format!(
                     "JPEG frame {} is {w}×{h}, the stream says {}×{}",
@@ -469,7 +470,7 @@ impl AviSource {
     fn emit(&mut self, frame: RgbImage) -> Result<Option<RgbImage>, DecodeError> {
         if frame.dimensions() != (self.info.width, self.info.height) {
             let (w, h) = frame.dimensions();
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 &self.path,
                 format!(
                     "a frame is {w}×{h}, the stream says {}×{}",

@@ -106,6 +106,38 @@ pub enum DecodeError {
     Other { path: PathBuf, what: String },
 }
 
+impl DecodeError {
+    pub fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
+        DecodeError::Corrupt {
+            path: path.to_path_buf(),
+            what: what.into(),
+        }
+    }
+
+    pub fn truncated(path: &Path, what: impl Into<String>) -> DecodeError {
+        DecodeError::Truncated {
+            path: path.to_path_buf(),
+            what: what.into(),
+        }
+    }
+
+    pub fn io(path: &Path, source: std::io::Error) -> DecodeError {
+        DecodeError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+
+    /// An I/O error, or `Truncated` saying `eof` when the file ended early.
+    pub fn io_or_truncated(path: &Path, source: std::io::Error, eof: &str) -> DecodeError {
+        if source.kind() == std::io::ErrorKind::UnexpectedEof {
+            DecodeError::truncated(path, eof)
+        } else {
+            DecodeError::io(path, source)
+        }
+    }
+}
+
 /// A stream of frames in display order.
 pub trait FrameSource: Send {
     fn info(&self) -> &ClipInfo;

@@ -64,13 +64,6 @@ fn not_available(path: &Path) -> DecodeError {
     }
 }
 
-fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
-    DecodeError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
 /// The first stream facts parsed from ffmpeg's or ffprobe's output.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct StreamSummary {
@@ -242,7 +235,7 @@ pub fn probe(path: &Path, limits: &Limits) -> Result<ClipInfo, DecodeError> {
             "default=noprint_wrappers=1".as_ref(),
             path.as_os_str(),
         ];
-        let (out, err) = run_capture(&ffprobe, &args).map_err(|e| io_err(path, e))?;
+        let (out, err) = run_capture(&ffprobe, &args).map_err(|e| DecodeError::io(path, e))?;
         parse_ffprobe(&out).ok_or_else(|| DecodeError::UnknownFormat {
             path: path.to_path_buf(),
             what: format!("ffprobe finds no video stream ({})", tail(&err)),
@@ -254,7 +247,7 @@ pub fn probe(path: &Path, limits: &Limits) -> Result<ClipInfo, DecodeError> {
             "-i".as_ref(),
             path.as_os_str(),
         ];
-        let (_, err) = run_capture(&ffmpeg, &args).map_err(|e| io_err(path, e))?;
+        let (_, err) = run_capture(&ffmpeg, &args).map_err(|e| DecodeError::io(path, e))?;
         parse_ffmpeg_stderr(&err).ok_or_else(|| DecodeError::UnknownFormat {
             path: path.to_path_buf(),
             what: format!("ffmpeg finds no video stream ({})", tail(&err)),
@@ -307,7 +300,7 @@ fn spawn_source(
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .map_err(|e| io_err(path, e))?;
+        .map_err(|e| DecodeError::io(path, e))?;
     let stdout = child.stdout.take().expect("stdout is piped");
     let mut stderr = child.stderr.take().expect("stderr is piped");
     let log = Arc::new(Mutex::new(Vec::new()));
@@ -333,7 +326,7 @@ fn spawn_source(
         Err(e) => {
             let _ = child.kill();
             let _ = child.wait();
-            return Err(io_err(path, e));
+            return Err(DecodeError::io(path, e));
         }
     };
     Ok(FfmpegSource {
@@ -367,7 +360,7 @@ impl FfmpegSource {
     fn finish(&mut self, partial: usize) -> Result<Option<RgbImage>, DecodeError> {
         self.stdout = None;
         let status = match self.child.take() {
-            Some(mut c) => c.wait().map_err(|e| io_err(&self.path, e))?,
+            Some(mut c) => c.wait().map_err(|e| DecodeError::io(&self.path, e))?,
             None => return Ok(None),
         };
         if let Some(d) = self.drain.take() {
@@ -420,7 +413,7 @@ impl FrameSource for FfmpegSource {
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
                 Err(e) => {
                     self.kill();
-                    return Err(io_err(&self.path, e));
+                    return Err(DecodeError::io(&self.path, e));
                 }
             }
         }

@@ -90,33 +90,12 @@ struct Demuxed {
     samples: Vec<(u64, u64)>,
 }
 
-fn io_err(path: &Path, e: std::io::Error) -> DecodeError {
-    DecodeError::Io {
-        path: path.to_path_buf(),
-        source: e,
-    }
-}
-
-fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Corrupt {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
-fn truncated(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Truncated {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
 fn mp4_err(path: &Path, e: re_mp4::Error) -> DecodeError {
     match e {
         re_mp4::Error::IoError(io) if io.kind() == std::io::ErrorKind::UnexpectedEof => {
-            truncated(path, "a box is cut off")
+            DecodeError::truncated(path, "a box is cut off")
         }
-        other => corrupt(path, format!("MP4 structure: {other}")),
+        other => DecodeError::corrupt(path, format!("MP4 structure: {other}")),
     }
 }
 
@@ -124,7 +103,7 @@ fn mp4_err(path: &Path, e: re_mp4::Error) -> DecodeError {
 fn guarded<T>(path: &Path, f: impl FnOnce() -> Result<T, re_mp4::Error>) -> Result<T, DecodeError> {
     match catch_unwind(AssertUnwindSafe(f)) {
         Ok(r) => r.map_err(|e| mp4_err(path, e)),
-        Err(_) => Err(corrupt(path, "inconsistent MP4 sample tables")),
+        Err(_) => Err(DecodeError::corrupt(path, "inconsistent MP4 sample tables")),
     }
 }
 
@@ -136,11 +115,15 @@ fn find_moov(path: &Path, file: &mut File, len: u64) -> Result<(u64, u64), Decod
     while pos < len {
         let mut head = [0u8; 8];
         if len - pos < 8 {
-            return Err(truncated(path, format!("box header cut off at byte {pos}")));
+            return Err(DecodeError::truncated(
+                path,
+                format!("box header cut off at byte {pos}"),
+            ));
         }
         file.seek(SeekFrom::Start(pos))
-            .map_err(|e| io_err(path, e))?;
-        file.read_exact(&mut head).map_err(|e| io_err(path, e))?;
+            .map_err(|e| DecodeError::io(path, e))?;
+        file.read_exact(&mut head)
+            .map_err(|e| DecodeError::io(path, e))?;
         let kind = [head[4], head[5], head[6], head[7]];
         if first {
             const KNOWN: [&[u8; 4]; 7] = [
@@ -158,28 +141,38 @@ fn find_moov(path: &Path, file: &mut File, len: u64) -> Result<(u64, u64), Decod
         if size == 1 {
             let mut large = [0u8; 8];
             if len - pos < 16 {
-                return Err(truncated(path, format!("box header cut off at byte {pos}")));
+                return Err(DecodeError::truncated(
+                    path,
+                    format!("box header cut off at byte {pos}"),
+                ));
             }
-            file.read_exact(&mut large).map_err(|e| io_err(path, e))?;
+            file.read_exact(&mut large)
+                .map_err(|e| DecodeError::io(path, e))?;
             size = u64::from_be_bytes(large);
             if size < 16 {
-                return Err(corrupt(path, format!("box at byte {pos} has size {size}")));
+                return Err(DecodeError::corrupt(
+                    path,
+                    format!("box at byte {pos} has size {size}"),
+                ));
             }
         } else if size == 0 {
             size = len - pos;
         } else if size < 8 {
-            return Err(corrupt(path, format!("box at byte {pos} has size {size}")));
+            return Err(DecodeError::corrupt(
+                path,
+                format!("box at byte {pos} has size {size}"),
+            ));
         }
         let end = pos
             .checked_add(size)
-            .ok_or_else(|| corrupt(path, "box size overflows"))?;
+            .ok_or_else(|| DecodeError::corrupt(path, "box size overflows"))?;
         let name = String::from_utf8_lossy(&kind).into_owned();
         if end > len {
             let what = format!(
                 "{name} box at byte {pos} declares {size} bytes, only {} are in the file",
                 len - pos
             );
-            return Err(truncated(path, what));
+            return Err(DecodeError::truncated(path, what));
         }
         if &kind == b"moov" {
             if size > MAX_MOOV_BYTES {
@@ -189,7 +182,7 @@ fn find_moov(path: &Path, file: &mut File, len: u64) -> Result<(u64, u64), Decod
                 });
             }
             if moov.is_some() {
-                return Err(corrupt(path, "two moov boxes"));
+                return Err(DecodeError::corrupt(path, "two moov boxes"));
             }
             moov = Some((pos, size));
         }
@@ -199,7 +192,10 @@ fn find_moov(path: &Path, file: &mut File, len: u64) -> Result<(u64, u64), Decod
     if let Some(m) = moov {
         return Ok(m);
     }
-    Err(truncated(path, "no moov box (the index) in the file"))
+    Err(DecodeError::truncated(
+        path,
+        "no moov box (the index) in the file",
+    ))
 }
 
 /// Checks what `re_mp4` indexes without checking, for one track's sample tables.
@@ -207,7 +203,10 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
     let stsz = &stbl.stsz;
     let n = u64::from(stsz.sample_count);
     if stsz.sample_size == 0 && stsz.sample_sizes.len() as u64 != n {
-        return Err(corrupt(path, "stsz lists fewer sizes than samples"));
+        return Err(DecodeError::corrupt(
+            path,
+            "stsz lists fewer sizes than samples",
+        ));
     }
     if n > MAX_TRACK_SAMPLES {
         return Err(DecodeError::TooLarge {
@@ -221,16 +220,27 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
     let chunks = match (&stbl.stco, &stbl.co64) {
         (Some(stco), _) => stco.entries.len() as u64,
         (None, Some(co64)) => co64.entries.len() as u64,
-        (None, None) => return Err(corrupt(path, "no chunk offset table (stco/co64)")),
+        (None, None) => {
+            return Err(DecodeError::corrupt(
+                path,
+                "no chunk offset table (stco/co64)",
+            ))
+        }
     };
     let stsc = &stbl.stsc.entries;
     if stsc.is_empty() {
-        return Err(corrupt(path, "empty sample-to-chunk table (stsc)"));
+        return Err(DecodeError::corrupt(
+            path,
+            "empty sample-to-chunk table (stsc)",
+        ));
     }
     let mut prev = 0u32;
     for e in stsc {
         if e.first_chunk <= prev {
-            return Err(corrupt(path, "stsc chunk numbers do not increase from 1"));
+            return Err(DecodeError::corrupt(
+                path,
+                "stsc chunk numbers do not increase from 1",
+            ));
         }
         prev = e.first_chunk;
     }
@@ -253,7 +263,7 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
             last_in_chunk += u64::from(stsc[run].samples_per_chunk);
         }
         if chunk > chunks {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("sample {s} is in chunk {chunk}, but only {chunks} chunk offsets"),
             ));
@@ -283,7 +293,7 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
         &mut stbl.stts.entries.iter().map(|e| u64::from(e.sample_count)),
         true,
     ) {
-        return Err(corrupt(
+        return Err(DecodeError::corrupt(
             path,
             "time-to-sample table (stts) covers fewer samples than the track",
         ));
@@ -293,7 +303,7 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
             &mut ctts.entries.iter().map(|e| u64::from(e.sample_count)),
             false,
         ) {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 "composition offsets (ctts) cover fewer samples than the track",
             ));
@@ -301,7 +311,7 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
     }
     if let Some(stss) = &stbl.stss {
         if stss.entries.contains(&0) {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 "sync sample table (stss) has sample number 0",
             ));
@@ -311,16 +321,17 @@ fn check_stbl(path: &Path, stbl: &StblBox) -> Result<(), DecodeError> {
 }
 
 fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
-    let mut file = File::open(path).map_err(|e| io_err(path, e))?;
-    let len = file.metadata().map_err(|e| io_err(path, e))?.len();
+    let mut file = File::open(path).map_err(|e| DecodeError::io(path, e))?;
+    let len = file.metadata().map_err(|e| DecodeError::io(path, e))?.len();
     let (moov_pos, moov_size) = find_moov(path, &mut file, len)?;
 
     // Parse the moov alone first and check its tables, so re_mp4 never indexes past them.
     file.seek(SeekFrom::Start(moov_pos))
-        .map_err(|e| io_err(path, e))?;
+        .map_err(|e| DecodeError::io(path, e))?;
     let moov_bytes = {
         let mut b = vec![0u8; moov_size as usize];
-        file.read_exact(&mut b).map_err(|e| io_err(path, e))?;
+        file.read_exact(&mut b)
+            .map_err(|e| DecodeError::io(path, e))?;
         b
     };
     let moov = guarded(path, || {
@@ -337,7 +348,8 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
     }
     drop(moov);
 
-    file.seek(SeekFrom::Start(0)).map_err(|e| io_err(path, e))?;
+    file.seek(SeekFrom::Start(0))
+        .map_err(|e| DecodeError::io(path, e))?;
     let mp4 = guarded(path, || re_mp4::Mp4::read(BufReader::new(&mut file), len))?;
 
     let Some(track) = mp4
@@ -345,7 +357,7 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
         .values()
         .find(|t| t.kind == Some(TrackKind::Video))
     else {
-        return Err(corrupt(path, "no video track"));
+        return Err(DecodeError::corrupt(path, "no video track"));
     };
     let trak = track.trak(&mp4);
     let stbl = &trak.mdia.minf.stbl;
@@ -390,26 +402,29 @@ fn demux(path: &Path, limits: &Limits) -> Result<Demuxed, DecodeError> {
         });
     }
     if frame_count == 0 {
-        return Err(corrupt(path, "the video track has no samples"));
+        return Err(DecodeError::corrupt(path, "the video track has no samples"));
     }
     let mut samples = Vec::with_capacity(track.samples.len());
     for (i, s) in track.samples.iter().enumerate() {
         if s.size > MAX_SAMPLE_BYTES {
-            return Err(corrupt(path, format!("sample {i} claims {} bytes", s.size)));
+            return Err(DecodeError::corrupt(
+                path,
+                format!("sample {i} claims {} bytes", s.size),
+            ));
         }
         let end = s
             .offset
             .checked_add(s.size)
-            .ok_or_else(|| corrupt(path, "sample offset overflows"))?;
+            .ok_or_else(|| DecodeError::corrupt(path, "sample offset overflows"))?;
         if end > len {
             let what = format!(
                 "sample {i} (bytes {}..{end}) lies past the end of the {len}-byte file",
                 s.offset
             );
             return Err(if s.offset < len && moov_pos < s.offset {
-                truncated(path, what)
+                DecodeError::truncated(path, what)
             } else {
-                corrupt(path, what)
+                DecodeError::corrupt(path, what)
             });
         }
         samples.push((s.offset, s.size));
@@ -473,7 +488,7 @@ impl Mp4Source {
     fn checked(&self, frame: RgbImage) -> Result<Option<RgbImage>, DecodeError> {
         if frame.dimensions() != (self.info.width, self.info.height) {
             let (w, h) = frame.dimensions();
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 &self.path,
                 format!(
                     "a decoded frame is {w}×{h}, the container says {}×{}",
@@ -500,12 +515,15 @@ impl FrameSource for Mp4Source {
                 self.buf.resize(size as usize, 0);
                 self.file
                     .seek(SeekFrom::Start(offset))
-                    .map_err(|e| io_err(&self.path, e))?;
+                    .map_err(|e| DecodeError::io(&self.path, e))?;
                 self.file.read_exact(&mut self.buf).map_err(|e| {
                     if e.kind() == std::io::ErrorKind::UnexpectedEof {
-                        truncated(&self.path, format!("sample {} is cut off", self.next - 1))
+                        DecodeError::truncated(
+                            &self.path,
+                            format!("sample {} is cut off", self.next - 1),
+                        )
                     } else {
-                        io_err(&self.path, e)
+                        DecodeError::io(&self.path, e)
                     }
                 })?;
                 let frame = self

@@ -66,20 +66,6 @@ impl Y4mHeader {
     }
 }
 
-fn corrupt(path: &Path, what: impl Into<String>) -> DecodeError {
-    DecodeError::Corrupt {
-        path: path.to_path_buf(),
-        what: what.into(),
-    }
-}
-
-fn io_err(path: &Path, source: std::io::Error) -> DecodeError {
-    DecodeError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
 /// Reads one `\n`-terminated line of at most [`MAX_LINE`] bytes (without the `\n`).
 /// `Ok(None)` at a clean end of file.
 fn read_line<R: BufRead>(
@@ -92,13 +78,13 @@ fn read_line<R: BufRead>(
         .by_ref()
         .take(MAX_LINE as u64 + 1)
         .read_until(b'\n', &mut line)
-        .map_err(|e| io_err(path, e))?;
+        .map_err(|e| DecodeError::io(path, e))?;
     if n == 0 {
         return Ok(None);
     }
     if line.last() != Some(&b'\n') {
         if line.len() > MAX_LINE {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("{what} line longer than {MAX_LINE} bytes"),
             ));
@@ -115,9 +101,10 @@ fn read_line<R: BufRead>(
 /// Parses a header line (without its `\n`).
 pub fn parse_header(line: &[u8], path: &Path) -> Result<Y4mHeader, DecodeError> {
     if !line.is_ascii() {
-        return Err(corrupt(path, "header is not ASCII"));
+        return Err(DecodeError::corrupt(path, "header is not ASCII"));
     }
-    let text = std::str::from_utf8(line).map_err(|_| corrupt(path, "header is not ASCII"))?;
+    let text =
+        std::str::from_utf8(line).map_err(|_| DecodeError::corrupt(path, "header is not ASCII"))?;
     let mut tokens = text.split(' ').filter(|t| !t.is_empty());
     if tokens.next() != Some("YUV4MPEG2") {
         return Err(DecodeError::UnknownFormat {
@@ -134,11 +121,15 @@ pub fn parse_header(line: &[u8], path: &Path) -> Result<Y4mHeader, DecodeError> 
             "W" => width = value.parse::<u32>().ok(),
             "H" => height = value.parse::<u32>().ok(),
             "F" => {
-                let (n, d) = value
-                    .split_once(':')
-                    .ok_or_else(|| corrupt(path, format!("bad frame rate {value:?}")))?;
-                let n: f64 = n.parse().map_err(|_| corrupt(path, "bad frame rate"))?;
-                let d: f64 = d.parse().map_err(|_| corrupt(path, "bad frame rate"))?;
+                let (n, d) = value.split_once(':').ok_or_else(|| {
+                    DecodeError::corrupt(path, format!("bad frame rate {value:?}"))
+                })?;
+                let n: f64 = n
+                    .parse()
+                    .map_err(|_| DecodeError::corrupt(path, "bad frame rate"))?;
+                let d: f64 = d
+                    .parse()
+                    .map_err(|_| DecodeError::corrupt(path, "bad frame rate"))?;
                 if d > 0.0 && n > 0.0 {
                     fps = n / d;
                 }
@@ -168,8 +159,9 @@ pub fn parse_header(line: &[u8], path: &Path) -> Result<Y4mHeader, DecodeError> 
             _ => {}
         }
     }
-    let width = width.ok_or_else(|| corrupt(path, "header has no valid W (width)"))?;
-    let height = height.ok_or_else(|| corrupt(path, "header has no valid H (height)"))?;
+    let width = width.ok_or_else(|| DecodeError::corrupt(path, "header has no valid W (width)"))?;
+    let height =
+        height.ok_or_else(|| DecodeError::corrupt(path, "header has no valid H (height)"))?;
     Ok(Y4mHeader {
         width,
         height,
@@ -184,8 +176,8 @@ fn open_header(
     path: &Path,
     limits: &Limits,
 ) -> Result<(BufReader<File>, Y4mHeader, u64), DecodeError> {
-    let file = File::open(path).map_err(|e| io_err(path, e))?;
-    let file_len = file.metadata().map_err(|e| io_err(path, e))?.len();
+    let file = File::open(path).map_err(|e| DecodeError::io(path, e))?;
+    let file_len = file.metadata().map_err(|e| DecodeError::io(path, e))?.len();
     let mut reader = BufReader::new(file);
     let line = read_line(&mut reader, path, "header")?.ok_or_else(|| DecodeError::Truncated {
         path: path.to_path_buf(),
@@ -286,7 +278,7 @@ impl Y4mSource {
             return Ok(None);
         };
         if !line.starts_with(b"FRAME") {
-            return Err(corrupt(
+            return Err(DecodeError::corrupt(
                 path,
                 format!("frame {} does not start with FRAME", self.index),
             ));
@@ -310,7 +302,7 @@ impl Y4mSource {
                 }
                 Ok(k) => filled += k,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(io_err(path, e)),
+                Err(e) => return Err(DecodeError::io(path, e)),
             }
         }
         self.index += 1;
