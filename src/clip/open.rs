@@ -215,6 +215,11 @@ struct MaskSource {
     info: ClipInfo,
 }
 
+/// Whether a pixel of a mask frame is set: BT.601 luma at least 128.
+pub fn mask_on([r, g, b]: [u8; 3]) -> bool {
+    299 * u32::from(r) + 587 * u32::from(g) + 114 * u32::from(b) >= 128_000
+}
+
 impl FrameSource for MaskSource {
     fn info(&self) -> &ClipInfo {
         &self.info
@@ -225,10 +230,7 @@ impl FrameSource for MaskSource {
             return Ok(None);
         };
         for px in frame.pixels_mut() {
-            let [r, g, b] = px.0;
-            // BT.601 luma, ×1000.
-            let luma = 299 * u32::from(r) + 587 * u32::from(g) + 114 * u32::from(b);
-            let v = if luma >= 128_000 { 255 } else { 0 };
+            let v = if mask_on(px.0) { 255 } else { 0 };
             px.0 = [v, v, v];
         }
         Ok(Some(frame))

@@ -76,12 +76,12 @@ impl Segmenter {
     }
 }
 
-/// A mask frame (a silhouette clip) as a [`Mask`]: set where the pixel is bright.
+/// A mask frame (a silhouette clip) as a [`Mask`], by the rule mask clips are read
+/// with ([`crate::clip::open::mask_on`]).
 pub fn mask_from_frame(frame: &RgbImage) -> Mask {
     let mut m = Mask::new(frame.width(), frame.height());
     for (x, y, p) in frame.enumerate_pixels() {
-        let [r, g, b] = p.0;
-        if (r as u32 + g as u32 + b as u32) >= 3 * 128 {
+        if crate::clip::open::mask_on(p.0) {
             m.set(x, y, true);
         }
     }
