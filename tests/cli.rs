@@ -1,33 +1,13 @@
 //! The `monocap` binary's contract (contracts.md): exit status 0 and the promised files
 //! on success; on failure a non-zero status and ONE line on stderr naming the problem.
 
-use std::path::{Path, PathBuf};
+mod common;
+
+use common::TempDir;
+use std::path::Path;
 use std::process::{Command, Output};
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
-
-/// A fresh directory under the system temp dir, removed when dropped (also on panic).
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let dir =
-            std::env::temp_dir().join(format!("monocap-cli-test-{}-{tag}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-
-    fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 fn monocap(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_monocap"))
@@ -90,8 +70,8 @@ fn read_json(path: &Path) -> serde_json::Value {
 #[test]
 fn synth_writes_the_clip_and_its_truth() {
     let tmp = TempDir::new("ok");
-    let clip = tmp.join("x.y4m");
-    let truth = tmp.join("t.json");
+    let clip = tmp.path("x.y4m");
+    let truth = tmp.path("t.json");
     let out = synth(
         &clip,
         &[
@@ -124,18 +104,13 @@ fn synth_writes_the_clip_and_its_truth() {
     assert_eq!(frames[0]["joints3d"].as_array().unwrap().len(), joints);
     assert_eq!(frames[0]["joints2d"].as_array().unwrap().len(), joints);
     // No temporary file is left next to the outputs.
-    let mut names: Vec<String> = std::fs::read_dir(&tmp.0)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    assert_eq!(names, ["t.json", "x.y4m"]);
+    assert_eq!(tmp.files(), ["t.json", "x.y4m"]);
 }
 
 #[test]
 fn synth_writes_gif_and_zip_and_takes_negative_azimuths() {
     let tmp = TempDir::new("formats");
-    let gif = tmp.join("x.gif");
+    let gif = tmp.path("x.gif");
     let out = synth(
         &gif,
         &["--duration-s", "0.2", "--width", "80", "--height", "60"],
@@ -143,8 +118,8 @@ fn synth_writes_gif_and_zip_and_takes_negative_azimuths() {
     assert_success("gif", &out);
     assert!(std::fs::read(&gif).unwrap().starts_with(b"GIF8"));
 
-    let zip = tmp.join("x.zip");
-    let truth = tmp.join("t.json");
+    let zip = tmp.path("x.zip");
+    let truth = tmp.path("t.json");
     let out = synth(
         &zip,
         &[
@@ -164,7 +139,7 @@ fn synth_writes_gif_and_zip_and_takes_negative_azimuths() {
     assert_eq!(json["camera"]["azimuth_deg"], -90.0);
     assert_eq!(json["frame_count"], 21);
 
-    let out = synth(&tmp.join("y.zip"), &["--azimuth-deg=-90.5", "--seed", "7"]);
+    let out = synth(&tmp.path("y.zip"), &["--azimuth-deg=-90.5", "--seed", "7"]);
     assert_success("--azimuth-deg=-90.5", &out);
 }
 
@@ -182,18 +157,18 @@ fn help_exits_zero() {
 fn bad_input_fails_with_one_line_naming_the_problem() {
     let tmp = TempDir::new("bad");
     let fixture = std::fs::read_to_string(FIXTURE).unwrap();
-    let out = tmp.join("x.zip");
+    let out = tmp.path("x.zip");
 
     // Input files that are not usable captures.
-    let missing = tmp.join("no-such-capture.bvh");
-    let garbage = tmp.join("garbage.bvh");
+    let missing = tmp.path("no-such-capture.bvh");
+    let garbage = tmp.path("garbage.bvh");
     let bytes: Vec<u8> = (0u32..4096)
         .map(|i| (i.wrapping_mul(2_654_435_761) >> 13) as u8)
         .collect();
     std::fs::write(&garbage, bytes).unwrap();
-    let truncated = tmp.join("truncated.bvh");
+    let truncated = tmp.path("truncated.bvh");
     std::fs::write(&truncated, &fixture[..fixture.len() / 2]).unwrap();
-    let huge = tmp.join("huge.bvh");
+    let huge = tmp.path("huge.bvh");
     let declared = fixture.replacen("Frames:\t20", "Frames:\t1000000000", 1);
     assert_ne!(declared, fixture, "the fixture's frame count line changed");
     std::fs::write(&huge, declared).unwrap();
@@ -210,7 +185,7 @@ fn bad_input_fails_with_one_line_naming_the_problem() {
     assert_fails_with("truncated BVH", &result, "file ends");
 
     // Options.
-    let nowhere = tmp.join("no-such-dir").join("x.zip");
+    let nowhere = tmp.path("no-such-dir").join("x.zip");
     for (what, out, extra, needle) in [
         ("--fps 0", &out, &["--fps", "0"][..], "frame rate"),
         ("--width 0", &out, &["--width", "0"], "image size"),
@@ -230,12 +205,12 @@ fn bad_input_fails_with_one_line_naming_the_problem() {
         ("--style blue", &out, &["--style", "blue"], "blue"),
         ("--fps abc", &out, &["--fps", "abc"], "--fps"),
         ("--duration-s 0", &out, &["--duration-s", "0"], "duration"),
-        ("output extension", &tmp.join("x.xyz"), &[], "extension"),
+        ("output extension", &tmp.path("x.xyz"), &[], "extension"),
         ("output directory", &nowhere, &[], "no-such-dir"),
     ] {
         assert_fails_with(what, &synth(out, extra), needle);
     }
-    assert!(!out.exists() && !tmp.join("x.xyz").exists());
+    assert!(!out.exists() && !tmp.path("x.xyz").exists());
 
     // Missing required arguments are named on the one line.
     let result = monocap(&["synth", "--bvh", FIXTURE]);
@@ -247,7 +222,7 @@ fn bad_input_fails_with_one_line_naming_the_problem() {
 #[test]
 fn probe_and_silhouettes_on_a_synthetic_clip() {
     let dir = TempDir::new("probe-sil");
-    let clip = dir.join("clip.y4m");
+    let clip = dir.path("clip.y4m");
     assert_success(
         "synth",
         &synth(&clip, &["--empty-frames", "6", "--style", "color"]),
@@ -274,8 +249,8 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
         assert!(info.get(key).is_some(), "probe lacks {key}");
     }
 
-    let masks = dir.join("masks.zip");
-    let debug = dir.join("debug.zip");
+    let masks = dir.path("masks.zip");
+    let debug = dir.path("debug.zip");
     let out = monocap(&[
         "silhouettes",
         s(&clip),
@@ -309,7 +284,7 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
     let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert_eq!(info["frame_count"], 26);
 
-    let text = dir.join("notes.mp4");
+    let text = dir.path("notes.mp4");
     std::fs::write(&text, "not a video").unwrap();
     assert_fails_with("probe text", &monocap(&["probe", s(&text)]), "notes.mp4");
     assert_fails_with(
@@ -326,7 +301,7 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
     );
     assert_fails_with(
         "bad output",
-        &monocap(&["silhouettes", s(&clip), "-o", s(&dir.join("m.xyz"))]),
+        &monocap(&["silhouettes", s(&clip), "-o", s(&dir.path("m.xyz"))]),
         "extension",
     );
 }
@@ -336,11 +311,11 @@ fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
     let dir = TempDir::new("tiny");
     // Tiny frames are legal: they must render, not panic.
     for (w, h) in [("3", "3"), ("1", "2"), ("2", "1")] {
-        let out = dir.join(&format!("tiny_{w}x{h}.y4m"));
+        let out = dir.path(&format!("tiny_{w}x{h}.y4m"));
         let res = synth(&out, &["--width", w, "--height", h, "--duration-s", "0.2"]);
         assert_success(&format!("synth {w}×{h}"), &res);
     }
-    let clip = dir.join("clip.y4m");
+    let clip = dir.path("clip.y4m");
     assert_success("synth", &synth(&clip, &["--empty-frames", "4"]));
     assert_fails_with(
         "person-free range past the end",
@@ -348,7 +323,7 @@ fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
             "silhouettes",
             s(&clip),
             "-o",
-            s(&dir.join("m.zip")),
+            s(&dir.path("m.zip")),
             "--empty-frames",
             "5..200",
         ]),

@@ -2,6 +2,9 @@
 //! forward kinematics written out here with explicit rotation matrices, a Kabsch fit
 //! from the capture's world to the truth's camera frame, and the pinhole projection.
 
+mod common;
+
+use common::TempDir;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
@@ -13,29 +16,6 @@ use nalgebra::{Matrix3, Vector3};
 
 const MOCAP: &str = "../shared/data/mocap";
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
-
-/// A fresh directory under the system temp dir, removed when dropped (also on panic).
-struct TempDir(PathBuf);
-
-impl TempDir {
-    fn new(tag: &str) -> TempDir {
-        let dir =
-            std::env::temp_dir().join(format!("monocap-synth-test-{}-{tag}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
-        std::fs::create_dir_all(&dir).unwrap();
-        TempDir(dir)
-    }
-
-    fn join(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-
-impl Drop for TempDir {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
 
 // ---------------------------------------------------------------------------------------
 // The second path: forward kinematics from the channel values.
@@ -400,7 +380,7 @@ fn synth_silhouettes(
     opts: &SynthOptions,
     dir: &TempDir,
 ) -> (Truth, PathBuf) {
-    let clip = dir.join("clip.zip");
+    let clip = dir.path("clip.zip");
     let truth = synthesize(bvh, name, opts, &clip).unwrap();
     assert!(clip.is_file(), "{} was not written", clip.display());
     // The truth survives a JSON round trip (to within serde_json's float parsing).
@@ -492,7 +472,7 @@ fn fixture_frame_picking_follows_first_frame_and_duration() {
         fps: 20.0,
         ..SynthOptions::default()
     };
-    let truth = synthesize(&bvh, "f.bvh", &opts, &tmp.join("c.zip")).unwrap();
+    let truth = synthesize(&bvh, "f.bvh", &opts, &tmp.path("c.zip")).unwrap();
     let picked: Vec<usize> = truth.frames.iter().map(|f| f.source_frame).collect();
     // A 30.00003 fps source at 20 fps: steps of just over 1.5 source frames.
     assert_eq!(picked, [7, 9, 10, 12, 13]);
@@ -502,7 +482,7 @@ fn fixture_frame_picking_follows_first_frame_and_duration() {
         bvh: &bvh,
         opts: &opts,
         truth: &truth,
-        clip: &tmp.join("c.zip"),
+        clip: &tmp.path("c.zip"),
     };
     check_geometry(&case);
 }
@@ -574,7 +554,7 @@ fn synthesize_rejects_bad_options_with_a_message() {
         ),
     ];
     for (what, opts, out, needle) in cases {
-        let out = tmp.join(out);
+        let out = tmp.path(out);
         let result = std::panic::catch_unwind(|| synthesize(&bvh, "f.bvh", &opts, &out));
         let Ok(result) = result else {
             panic!("{what}: synthesize panicked");
