@@ -9,4 +9,5 @@ pub mod body;
 pub mod clip;
 pub mod motion;
 pub mod synth;
+pub mod track;
 pub mod vision;

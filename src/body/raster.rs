@@ -68,6 +68,21 @@ impl Mask {
         self.words.fill(0);
     }
 
+    /// Clears rows y0..=y1 (clipped to the image).
+    pub fn clear_rows(&mut self, y0: u32, y1: u32) {
+        if y0 >= self.height || y0 > y1 {
+            return;
+        }
+        let y1 = y1.min(self.height - 1);
+        self.words[y0 as usize * self.stride..(y1 as usize + 1) * self.stride].fill(0);
+    }
+
+    /// Mutable words of row y.
+    pub fn row_mut(&mut self, y: u32) -> &mut [u64] {
+        let s = y as usize * self.stride;
+        &mut self.words[s..s + self.stride]
+    }
+
     pub fn get(&self, x: u32, y: u32) -> bool {
         let w = self.words[y as usize * self.stride + (x as usize >> 6)];
         (w >> (x & 63)) & 1 == 1
@@ -386,6 +401,37 @@ pub fn render_mask(body: &Body, posed: &Posed, cam: &Camera, mask: &mut Mask) {
             draw_part(&prep, mask);
         }
     }
+}
+
+/// Draws the parts of `body` whose indices `parts` lists into `mask`, on top of what
+/// it holds (it is not cleared), and returns the range of rows drawn (`None` when no
+/// part is on screen). The objective re-renders only the parts a search moves.
+/// Allocation-free.
+///
+/// # Panics
+/// When `mask` is not the camera's size or an index is not a part's.
+pub fn render_parts(
+    body: &Body,
+    posed: &Posed,
+    cam: &Camera,
+    parts: &[usize],
+    mask: &mut Mask,
+) -> Option<(u32, u32)> {
+    assert!(
+        mask.width == cam.width && mask.height == cam.height,
+        "mask size differs from the camera's"
+    );
+    let mut rows: Option<(u32, u32)> = None;
+    for &pi in parts {
+        let part = &body.parts[pi];
+        let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+        if let Some(prep) = Prepared::new(part, &to_cam, cam) {
+            draw_part(&prep, mask);
+            let (a, b) = (prep.y0 as u32, prep.y1 as u32);
+            rows = Some(rows.map_or((a, b), |(lo, hi)| (lo.min(a), hi.max(b))));
+        }
+    }
+    rows
 }
 
 fn draw_part(prep: &Prepared, mask: &mut Mask) {

@@ -1,0 +1,6 @@
+//! The tracker (method.md §4–§5): fit the body model to every frame's silhouette.
+
+pub mod keyframes;
+pub mod metrics;
+pub mod objective;
+pub mod simplex;

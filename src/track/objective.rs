@@ -1,0 +1,528 @@
+//! The objective F(β) of method.md §4 (paper §4.2–4.3): how badly the model in pose β
+//! explains one frame's silhouette.
+//!
+//! F = c + e + a + l, or +∞ outside the joint limits or below the ground (Eq. 7):
+//!
+//! - c (Eq. 3), the core-weighted XOR: Σ over pixels where exactly one of the input
+//!   silhouette S and the model silhouette M is set, of the coremap d;
+//! - e (Eq. 4) = −w_e Σ M·T, the edge reward;
+//! - a (Eq. 6) = −w_a Σ M·R, the arm and leg region reward;
+//! - l (Eq. 5) = w_l Σ over the model's hands, feet and head of the pixel distance to
+//!   a detected candidate of its kind.
+//!
+//! c + e + a folds into one per-pixel map read only where the model is: since
+//! S ⊕ M = S + M − 2·S·M, c = Σ_S d + Σ_M d·(1 − 2S), so
+//! c + e + a = Σ_S d + Σ_{x∈M} G(x) with G = d·(1 − 2S) − w_e·T − w_a·R.
+//! [`Target`] holds G once per frame; an evaluation renders the model's silhouette
+//! as a bit mask and adds G over its set bits. While a search moves one group of
+//! parameters ([`Evaluator::focus`]), the parts that group does not move are rendered
+//! once, their share of the sum kept, and each evaluation renders and sums only the
+//! moving parts' pixels not already covered. Nothing is allocated per evaluation.
+
+use crate::body::params::{within_limits, Pose};
+use crate::body::raster::{render_parts, Mask};
+use crate::body::skeleton::{Dof, Joint, Posed, Tip, JOINT_COUNT};
+use crate::body::{Body, Camera, PART_COUNT};
+use crate::vision::features::{ExtremityKind, FrameFeatures};
+use nalgebra::Point3;
+
+/// Weights of the objective's terms (the paper's defaults).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Weights {
+    /// w_e of Eq. 4 (per edge pixel the model covers).
+    pub edge: f64,
+    /// w_l of Eq. 5 (per pixel of distance between a model end and its candidate).
+    pub extremity: f64,
+    /// w_a of Eq. 6 (per region pixel the model covers).
+    pub region: f64,
+}
+
+impl Default for Weights {
+    fn default() -> Self {
+        Weights {
+            edge: 20.0,
+            extremity: 20.0,
+            region: 20.0,
+        }
+    }
+}
+
+/// Everything the objective reads from one frame (built once per frame).
+#[derive(Clone, Debug)]
+pub struct Target {
+    pub width: u32,
+    pub height: u32,
+    /// G: what covering each pixel adds to the cost (row-major).
+    gain: Vec<f32>,
+    /// Σ_S d: the cost of a model that covers nothing.
+    base: f64,
+    /// Candidates for the model's hands, feet and head top (pixels).
+    hands: Vec<[f64; 2]>,
+    feet: Vec<[f64; 2]>,
+    heads: Vec<[f64; 2]>,
+    /// The input silhouette S (the person's blobs).
+    pub silhouette: Mask,
+    /// Height of the person's bounding box in pixels (0 when there is no person).
+    pub body_height: f64,
+}
+
+impl Target {
+    pub fn new(f: &FrameFeatures, w: &Weights) -> Target {
+        let (width, height) = (f.width, f.height);
+        let s = &f.person;
+        let mut gain = vec![0f32; f.coremap.len()];
+        let mut base = 0.0;
+        for y in 0..height {
+            for x in 0..width {
+                let i = (y * width + x) as usize;
+                let d = f.coremap[i];
+                let inside = s.get(x, y);
+                let mut g = if inside {
+                    base += d as f64;
+                    -d
+                } else {
+                    d
+                };
+                if inside && f.edges.get(x, y) {
+                    g -= w.edge as f32;
+                }
+                if f.regions.get(x, y) {
+                    g -= w.region as f32;
+                }
+                gain[i] = g;
+            }
+        }
+        let pick = |kinds: &[ExtremityKind]| -> Vec<[f64; 2]> {
+            f.extremities
+                .iter()
+                .filter(|e| kinds.contains(&e.kind))
+                .map(|e| e.pos)
+                .collect()
+        };
+        let mut heads = pick(&[ExtremityKind::Head]);
+        if let Some(h) = f.head {
+            heads = vec![h];
+        }
+        Target {
+            width,
+            height,
+            gain,
+            base,
+            hands: pick(&[ExtremityKind::Hand, ExtremityKind::Unknown]),
+            feet: pick(&[ExtremityKind::Foot, ExtremityKind::Unknown]),
+            heads,
+            silhouette: s.clone(),
+            body_height: f.body_height,
+        }
+    }
+
+    /// Whether the frame shows a person at all.
+    pub fn has_person(&self) -> bool {
+        self.body_height > 0.0
+    }
+}
+
+/// The terms of F at one pose (for reports and tests; [`Evaluator::cost`] is the
+/// fast path).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Terms {
+    /// c (Eq. 3).
+    pub xor: f64,
+    /// e (Eq. 4), ≤ 0.
+    pub edge: f64,
+    /// a (Eq. 6), ≤ 0.
+    pub region: f64,
+    /// l (Eq. 5), ≥ 0.
+    pub extremity: f64,
+    pub total: f64,
+}
+
+/// Ground constraint: the soles may sink at most this far (cm) below the ground.
+const GROUND_SLACK: f64 = 4.0;
+
+/// Evaluates F for one frame.
+pub struct Evaluator<'a> {
+    body: &'a Body,
+    cam: &'a Camera,
+    target: &'a Target,
+    weights: Weights,
+    /// World y of the ground (None: no ground constraint).
+    ground: Option<f64>,
+    /// Parts re-rendered per evaluation (all of them unless focused).
+    moving: Vec<usize>,
+    /// The parts that stay put while focused, and Σ G over them.
+    fixed: Mask,
+    fixed_sum: f64,
+    scratch: Mask,
+    posed: Posed,
+    /// Evaluations so far.
+    pub evals: u64,
+}
+
+impl<'a> Evaluator<'a> {
+    pub fn new(
+        body: &'a Body,
+        cam: &'a Camera,
+        target: &'a Target,
+        weights: Weights,
+        ground: Option<f64>,
+    ) -> Evaluator<'a> {
+        assert_eq!(
+            (cam.width, cam.height),
+            (target.width, target.height),
+            "camera and frame sizes differ"
+        );
+        Evaluator {
+            body,
+            cam,
+            target,
+            weights,
+            ground,
+            moving: (0..PART_COUNT).collect(),
+            fixed: Mask::new(cam.width, cam.height),
+            fixed_sum: 0.0,
+            scratch: Mask::new(cam.width, cam.height),
+            posed: Posed::default(),
+            evals: 0,
+        }
+    }
+
+    /// From now on only the parameters `params` change (the others keep their values
+    /// in `pose`): the parts they do not move are rendered once here.
+    pub fn focus(&mut self, pose: &Pose, params: &[usize]) {
+        let moves = joints_moved_by(params);
+        self.moving.clear();
+        let mut fixed_parts = Vec::with_capacity(PART_COUNT);
+        for (i, p) in self.body.parts.iter().enumerate() {
+            if moves[p.joint.index()] {
+                self.moving.push(i);
+            } else {
+                fixed_parts.push(i);
+            }
+        }
+        self.body.skeleton.pose(pose, &mut self.posed);
+        self.fixed.clear();
+        self.fixed_sum = 0.0;
+        if let Some((y0, y1)) = render_parts(
+            self.body,
+            &self.posed,
+            self.cam,
+            &fixed_parts,
+            &mut self.fixed,
+        ) {
+            self.fixed_sum = sum_over(&self.target.gain, &self.fixed, None, y0, y1);
+        }
+    }
+
+    /// Every part moves again.
+    pub fn unfocus(&mut self) {
+        self.moving = (0..PART_COUNT).collect();
+        self.fixed.clear();
+        self.fixed_sum = 0.0;
+    }
+
+    /// F(β) (+∞ when a constraint is violated).
+    pub fn cost(&mut self, pose: &Pose) -> f64 {
+        self.evals += 1;
+        if !within_limits(pose) {
+            return f64::INFINITY;
+        }
+        self.body.skeleton.pose(pose, &mut self.posed);
+        if self.below_ground() {
+            return f64::INFINITY;
+        }
+        self.scratch.clear();
+        let mut total = self.target.base + self.fixed_sum;
+        if let Some((y0, y1)) = render_parts(
+            self.body,
+            &self.posed,
+            self.cam,
+            &self.moving,
+            &mut self.scratch,
+        ) {
+            total += sum_over(&self.target.gain, &self.scratch, Some(&self.fixed), y0, y1);
+        }
+        total + self.weights.extremity * self.end_distances()
+    }
+
+    /// The model's whole silhouette at `pose`.
+    pub fn render(&mut self, pose: &Pose, out: &mut Mask) {
+        self.body.skeleton.pose(pose, &mut self.posed);
+        out.clear();
+        let all: [usize; PART_COUNT] = std::array::from_fn(|i| i);
+        render_parts(self.body, &self.posed, self.cam, &all, out);
+    }
+
+    /// The terms of F at `pose`, computed pixel by pixel (slow; for reports and tests).
+    pub fn terms(&mut self, pose: &Pose, features: &FrameFeatures) -> Terms {
+        let mut m = Mask::new(self.cam.width, self.cam.height);
+        self.render(pose, &mut m);
+        let mut t = Terms::default();
+        let s = &self.target.silhouette;
+        for y in 0..self.cam.height {
+            for x in 0..self.cam.width {
+                let (a, b) = (m.get(x, y), s.get(x, y));
+                if a != b {
+                    t.xor += features.core(x, y) as f64;
+                }
+                if a && b && features.edges.get(x, y) {
+                    t.edge -= self.weights.edge;
+                }
+                if a && features.regions.get(x, y) {
+                    t.region -= self.weights.region;
+                }
+            }
+        }
+        t.extremity = self.weights.extremity * self.end_distances();
+        let ok = within_limits(pose) && !self.below_ground();
+        t.total = if ok {
+            t.xor + t.edge + t.region + t.extremity
+        } else {
+            f64::INFINITY
+        };
+        t
+    }
+
+    /// IoU of the model's silhouette at `pose` with the input silhouette.
+    pub fn iou(&mut self, pose: &Pose) -> f64 {
+        let mut m = Mask::new(self.cam.width, self.cam.height);
+        self.render(pose, &mut m);
+        m.iou(&self.target.silhouette)
+    }
+
+    /// Lowest point of the soles (world y) of the posed body in `self.posed`.
+    fn below_ground(&self) -> bool {
+        let Some(g) = self.ground else {
+            return false;
+        };
+        sole_height(self.body, &self.posed) < g - GROUND_SLACK
+    }
+
+    /// Σ over the model's hands, feet and head top of the pixel distance to a
+    /// detected candidate of the same kind (Eq. 5). Left and right cannot be told
+    /// apart, so the two hands (feet) take the pairing with the candidates that
+    /// makes the sum smallest; with a single candidate only the nearer end is pulled
+    /// to it (the other is probably hidden), and with none the term is off.
+    fn end_distances(&self) -> f64 {
+        let tip = |t: Tip| {
+            let p = self.posed.tips[t as usize];
+            self.cam.project(&p)
+        };
+        let mut sum = 0.0;
+        for (ends, cands) in [
+            (
+                [tip(Tip::LeftHandTip), tip(Tip::RightHandTip)],
+                &self.target.hands,
+            ),
+            (
+                [tip(Tip::LeftToeTip), tip(Tip::RightToeTip)],
+                &self.target.feet,
+            ),
+        ] {
+            sum += pair_distance(&ends, cands);
+        }
+        if let (Some(h), false) = (tip(Tip::HeadTop), self.target.heads.is_empty()) {
+            sum += self
+                .target
+                .heads
+                .iter()
+                .map(|c| dist(&h, c))
+                .fold(f64::INFINITY, f64::min);
+        }
+        sum
+    }
+}
+
+fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
+}
+
+/// Smallest total distance pairing two model ends with distinct candidates (one end
+/// when there is one candidate; 0 with none). An end off-screen counts nothing.
+fn pair_distance(ends: &[Option<[f64; 2]>; 2], cands: &[[f64; 2]]) -> f64 {
+    let d = |e: &Option<[f64; 2]>, c: &[f64; 2]| e.map_or(0.0, |e| dist(&e, c));
+    match cands.len() {
+        0 => 0.0,
+        1 => d(&ends[0], &cands[0]).min(d(&ends[1], &cands[0])),
+        n => {
+            let mut best = f64::INFINITY;
+            for i in 0..n {
+                for j in 0..n {
+                    if i != j {
+                        best = best.min(d(&ends[0], &cands[i]) + d(&ends[1], &cands[j]));
+                    }
+                }
+            }
+            best
+        }
+    }
+}
+
+/// Σ of `gain` over the set pixels of `m` in rows y0..=y1, skipping those set in
+/// `except`.
+fn sum_over(gain: &[f32], m: &Mask, except: Option<&Mask>, y0: u32, y1: u32) -> f64 {
+    let w = m.width() as usize;
+    let mut total = 0f32;
+    for y in y0..=y1.min(m.height().saturating_sub(1)) {
+        let row = m.row(y);
+        let skip = except.map(|e| e.row(y));
+        let base = y as usize * w;
+        let mut acc = 0f32;
+        for (k, &word) in row.iter().enumerate() {
+            let mut bits = match skip {
+                Some(s) => word & !s[k],
+                None => word,
+            };
+            while bits != 0 {
+                let b = bits.trailing_zeros() as usize;
+                acc += gain[base + k * 64 + b];
+                bits &= bits - 1;
+            }
+        }
+        total += acc;
+    }
+    total as f64
+}
+
+/// Which joints move when the parameters `params` change: a joint moves when it or
+/// one of its ancestors takes one of them.
+pub fn joints_moved_by(params: &[usize]) -> [bool; JOINT_COUNT] {
+    let takes = |j: Joint| -> bool {
+        let r = match j.dof() {
+            Dof::Root => 0..6,
+            Dof::Three(i) => i..i + 3,
+            Dof::One(i) => i..i + 1,
+            Dof::Fixed => 0..0,
+        };
+        params.iter().any(|p| r.contains(p))
+    };
+    let mut out = [false; JOINT_COUNT];
+    for j in Joint::ALL {
+        // Parents come before children in Joint::ALL.
+        out[j.index()] = takes(j) || j.parent().is_some_and(|p| out[p.index()]);
+    }
+    out
+}
+
+/// World y of the lowest sole point (heel or toe of either foot).
+pub fn sole_height(body: &Body, posed: &Posed) -> f64 {
+    let foot = body.shape()[crate::body::params::sx::FOOT];
+    let mut lowest = f64::INFINITY;
+    for j in [Joint::LeftFoot, Joint::RightFoot] {
+        let frame = posed.joints[j.index()];
+        for z in [-2.0, 18.0 * foot] {
+            let p = frame * Point3::new(0.0, -8.0, z);
+            lowest = lowest.min(p.y);
+        }
+    }
+    lowest
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::params::{ix, rest_pose, STANDARD_SHAPE};
+    use crate::vision::features::{compute, FeatureOptions};
+
+    fn scene() -> (Body, Camera, Pose) {
+        let body = Body::new(&STANDARD_SHAPE);
+        let cam = Camera::new(320, 240, 55.0);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TY] -= 100.0;
+        pose[ix::ROOT_TZ] = -400.0;
+        pose[ix::L_SHOULDER + 1] = 40.0;
+        pose[ix::R_SHOULDER + 1] = 30.0;
+        pose[ix::L_HIP + 1] = 15.0;
+        (body, cam, pose)
+    }
+
+    fn target_of(body: &Body, cam: &Camera, pose: &Pose) -> (FrameFeatures, Target) {
+        let posed = body.posed(pose);
+        let mut m = Mask::new(cam.width, cam.height);
+        crate::body::raster::render_mask(body, &posed, cam, &mut m);
+        let f = compute(&m, None, None, &FeatureOptions::default());
+        let t = Target::new(&f, &Weights::default());
+        (f, t)
+    }
+
+    #[test]
+    fn fast_cost_matches_the_pixel_by_pixel_terms() {
+        let (body, cam, pose) = scene();
+        let (f, target) = target_of(&body, &cam, &pose);
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), None);
+        let mut other = pose;
+        other[ix::L_ELBOW] = 60.0;
+        other[ix::ROOT_TX] += 7.0;
+        for p in [pose, other] {
+            let fast = ev.cost(&p);
+            let slow = ev.terms(&p, &f).total;
+            assert!(
+                (fast - slow).abs() < 1e-3 * slow.abs().max(1.0),
+                "{fast} vs {slow}"
+            );
+        }
+        // Focused on the left arm, the cost is the same function.
+        let arm: Vec<usize> = (ix::L_SHOULDER..ix::L_SHOULDER + 4).collect();
+        ev.focus(&pose, &arm);
+        let mut bent = pose;
+        bent[ix::L_ELBOW] = 90.0;
+        let focused = ev.cost(&bent);
+        ev.unfocus();
+        let full = ev.cost(&bent);
+        assert!(
+            (focused - full).abs() < 1e-6 * full.abs(),
+            "{focused} vs {full}"
+        );
+    }
+
+    #[test]
+    fn own_render_is_near_the_minimum_and_cost_grows_as_a_limb_moves_away() {
+        let (body, cam, pose) = scene();
+        let (f, target) = target_of(&body, &cam, &pose);
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), None);
+        let own = ev.terms(&pose, &f);
+        assert_eq!(own.xor, 0.0, "the model's own silhouette has no mismatch");
+        assert!(ev.iou(&pose) > 0.999);
+        let mut prev = ev.cost(&pose);
+        for step in 1..=6 {
+            let mut p = pose;
+            p[ix::L_SHOULDER + 1] = 40.0 + 12.0 * step as f64;
+            let c = ev.cost(&p);
+            assert!(c > prev, "step {step}: {c} ≤ {prev}");
+            prev = c;
+        }
+        let mut moved = pose;
+        moved[ix::ROOT_TX] += 10.0;
+        assert!(ev.cost(&moved) > ev.cost(&pose));
+    }
+
+    #[test]
+    fn constraints_make_the_cost_infinite() {
+        let (body, cam, pose) = scene();
+        let (_, target) = target_of(&body, &cam, &pose);
+        let posed = body.posed(&pose);
+        let ground = sole_height(&body, &posed);
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), Some(ground));
+        assert!(ev.cost(&pose).is_finite());
+        let mut bad = pose;
+        bad[ix::L_ELBOW] = 170.0; // beyond the elbow's limit
+        assert_eq!(ev.cost(&bad), f64::INFINITY);
+        let mut sunk = pose;
+        sunk[ix::ROOT_TY] -= 10.0;
+        assert_eq!(ev.cost(&sunk), f64::INFINITY);
+        let mut jumped = pose;
+        jumped[ix::ROOT_TY] += 10.0;
+        assert!(ev.cost(&jumped).is_finite());
+    }
+
+    #[test]
+    fn moved_joints_follow_the_hierarchy() {
+        let m = joints_moved_by(&[ix::L_ELBOW]);
+        assert!(m[Joint::LeftForeArm.index()] && m[Joint::LeftHand.index()]);
+        assert!(!m[Joint::LeftArm.index()] && !m[Joint::Hips.index()]);
+        let all = joints_moved_by(&[ix::ROOT_RY]);
+        assert!(all.iter().all(|&b| b));
+        let spine = joints_moved_by(&[ix::SPINE]);
+        assert!(spine[Joint::RightHand.index()] && !spine[Joint::LeftLeg.index()]);
+    }
+}
