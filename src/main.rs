@@ -33,6 +33,95 @@ enum Command {
     Silhouettes(SilhouettesArgs),
     /// Render a clip of the body model driven by real motion capture, with its ground truth.
     Synth(SynthArgs),
+    /// Track a clip: fit the body model to every frame, write the motion (BVH, JSON).
+    Track(TrackArgs),
+    /// Accuracy benchmark: synthesise clips from motion capture, track them, compare.
+    Bench(BenchArgs),
+}
+
+#[derive(Args)]
+struct TrackArgs {
+    /// MP4/AVI (H.264, MJPEG), Y4M, GIF/APNG/WebP, ZIP/TAR of frames or of masks.
+    clip: PathBuf,
+    /// Output motion; the extension picks the format: .bvh or .json.
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
+    /// Also write the motion JSON here.
+    #[arg(long)]
+    json: Option<PathBuf>,
+    /// Horizontal field of view of the camera in degrees.
+    #[arg(long, default_value_t = 55.0)]
+    fov_deg: f64,
+    /// Keyframes JSON ({"keyframes": [{"frame": 42, "range": 10, "params": {...}}]}).
+    #[arg(long)]
+    keyframes: Option<PathBuf>,
+    /// Write the model's silhouette per frame (a .zip of PNGs, or .tar/.gif/.y4m).
+    #[arg(long)]
+    model_masks: Option<PathBuf>,
+    /// Runs of the hierarchical simplex per frame.
+    #[arg(long, default_value_t = 3)]
+    restarts: usize,
+    /// Frame to initialise on (default: chosen automatically).
+    #[arg(long)]
+    init_frame: Option<usize>,
+    /// Person-free frames: auto (still leading frames), none, or a range A..B.
+    #[arg(long, default_value = "auto")]
+    empty_frames: String,
+    /// The clip is a sequence of masks: no background subtraction.
+    #[arg(long)]
+    masks: bool,
+    /// Weight of the edge term (Eq. 4).
+    #[arg(long, default_value_t = 20.0)]
+    w_edge: f64,
+    /// Weight of the hand/foot/head term (Eq. 5).
+    #[arg(long, default_value_t = 20.0)]
+    w_extremity: f64,
+    /// Weight of the arm/leg region term (Eq. 6).
+    #[arg(long, default_value_t = 20.0)]
+    w_region: f64,
+    /// Weight w of the inside distance in the coremap (Eq. 3).
+    #[arg(long, default_value_t = 1.0)]
+    w_core: f64,
+    /// The tracker works at a whole fraction of the clip's size, at most this many rows.
+    #[arg(long, default_value_t = 288)]
+    work_height: u32,
+}
+
+#[derive(Args)]
+struct BenchArgs {
+    /// Folder of BVH files (every one is used).
+    #[arg(long, default_value = "../shared/data/mocap")]
+    mocap: PathBuf,
+    /// Only files whose name contains this.
+    #[arg(long)]
+    only: Option<String>,
+    /// Camera azimuths in degrees, comma-separated.
+    #[arg(long, default_value = "0,60,-120", allow_hyphen_values = true)]
+    azimuths: String,
+    /// Person-free lead-in frames, comma-separated (one clip per value).
+    #[arg(long, default_value = "10,0")]
+    lead_in: String,
+    /// Seconds of motion per clip.
+    #[arg(long, default_value_t = 3.5)]
+    duration_s: f64,
+    /// Runs of the hierarchical search per frame.
+    #[arg(long, default_value_t = 3)]
+    restarts: usize,
+    /// Track the true silhouettes instead of the extracted ones.
+    #[arg(long)]
+    true_silhouettes: bool,
+    /// Start from the true shape and pose (measures tracking apart from initialisation).
+    #[arg(long)]
+    oracle_init: bool,
+    /// Weight of the edge term (Eq. 4).
+    #[arg(long, default_value_t = 20.0)]
+    w_edge: f64,
+    /// Weight of the hand/foot/head term (Eq. 5).
+    #[arg(long, default_value_t = 20.0)]
+    w_extremity: f64,
+    /// Weight of the arm/leg region term (Eq. 6).
+    #[arg(long, default_value_t = 20.0)]
+    w_region: f64,
 }
 
 #[derive(Args)]
@@ -151,6 +240,8 @@ fn run(cli: Cli) -> Result<()> {
         Command::Probe(a) => probe_command(a),
         Command::Silhouettes(a) => silhouettes_command(a),
         Command::Synth(a) => synth_command(a),
+        Command::Track(a) => track_command(a),
+        Command::Bench(a) => bench_command(a),
     }
 }
 
@@ -277,6 +368,236 @@ fn synth_command(a: SynthArgs) -> Result<()> {
         truth.camera.distance_cm,
         truth.retarget.mean_cm,
         truth.retarget.max_cm
+    );
+    Ok(())
+}
+
+fn parse_list<T: std::str::FromStr>(flag: &str, text: &str) -> Result<Vec<T>> {
+    text.split(',')
+        .map(|v| {
+            v.trim()
+                .parse::<T>()
+                .map_err(|_| anyhow!("{flag} {text:?}: {v:?} is not a number"))
+        })
+        .collect()
+}
+
+fn bench_command(a: BenchArgs) -> Result<()> {
+    use monocap::track::bench::{self, BenchOptions};
+    use monocap::track::metrics::Accumulator;
+    let mut opts = BenchOptions {
+        mocap_dir: a.mocap,
+        filter: a.only,
+        azimuths: parse_list("--azimuths", &a.azimuths)?,
+        lead_in: parse_list("--lead-in", &a.lead_in)?,
+        duration_s: a.duration_s,
+        true_silhouettes: a.true_silhouettes,
+        oracle_init: a.oracle_init,
+        ..BenchOptions::default()
+    };
+    opts.track.restarts = a.restarts;
+    opts.track.weights.edge = a.w_edge;
+    opts.track.weights.extremity = a.w_extremity;
+    opts.track.weights.region = a.w_region;
+    println!(
+        "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>7} {:>6}",
+        "clip",
+        "frames",
+        "PCK0.1",
+        "PCK-swap",
+        "err%",
+        "PA-MPJPE",
+        "IoU",
+        "silIoU",
+        "lost",
+        "fps",
+        "search"
+    );
+    let mut all = Accumulator::default();
+    let mut fps = Vec::new();
+    let mut lost = 0;
+    let reports = bench::run(&opts, |r| {
+        println!(
+            "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>7.1} {:>5.0}%",
+            r.name,
+            r.acc.frames(),
+            r.acc.pck(),
+            r.acc.pck_swapped(),
+            100.0 * r.acc.mean_error_frac(),
+            r.acc.pa_mpjpe(),
+            r.acc.iou(),
+            r.silhouette_iou,
+            r.lost,
+            r.track_fps,
+            100.0 * r.search_share
+        );
+    })?;
+    for r in &reports {
+        all.merge(&r.acc);
+        fps.push(r.track_fps);
+        lost += r.lost;
+    }
+    fps.sort_by(f64::total_cmp);
+    println!(
+        "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6} {:>5} {:>7.1}",
+        format!("overall ({} clips; fps: median)", reports.len()),
+        all.frames(),
+        all.pck(),
+        all.pck_swapped(),
+        100.0 * all.mean_error_frac(),
+        all.pa_mpjpe(),
+        all.iou(),
+        "",
+        lost,
+        fps[fps.len() / 2]
+    );
+    Ok(())
+}
+
+/// What `-o` writes, from its extension.
+#[derive(Clone, Copy, PartialEq)]
+enum MotionFormat {
+    Bvh,
+    Json,
+}
+
+fn motion_format(path: &std::path::Path) -> Result<MotionFormat> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("bvh") => Ok(MotionFormat::Bvh),
+        Some("json") => Ok(MotionFormat::Json),
+        _ => anyhow::bail!(
+            "{}: unknown motion format (use a .bvh or .json extension)",
+            path.display()
+        ),
+    }
+}
+
+fn track_command(a: TrackArgs) -> Result<()> {
+    use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
+    use monocap::motion::json::MotionJson;
+    use monocap::track::run::{read_keyframes, track_clip, ClipTrackOptions};
+    use std::io::IsTerminal;
+
+    let format = motion_format(&a.out)?;
+    if let Some(p) = &a.json {
+        if motion_format(p)? != MotionFormat::Json {
+            anyhow::bail!("--json {}: expected a .json file", p.display());
+        }
+    }
+    if let Some(p) = &a.model_masks {
+        write::ClipFormat::from_path(p)?;
+    }
+    if a.restarts == 0 || a.restarts > 20 {
+        anyhow::bail!("--restarts {}: expected 1 to 20", a.restarts);
+    }
+    for (flag, v) in [
+        ("--w-edge", a.w_edge),
+        ("--w-extremity", a.w_extremity),
+        ("--w-region", a.w_region),
+        ("--w-core", a.w_core),
+    ] {
+        if !(v.is_finite() && v >= 0.0) {
+            anyhow::bail!("{flag} {v}: expected a number ≥ 0");
+        }
+    }
+    if a.work_height < 32 {
+        anyhow::bail!("--work-height {}: expected at least 32 rows", a.work_height);
+    }
+    let mut opts = ClipTrackOptions {
+        fov_deg: a.fov_deg,
+        masks: a.masks,
+        work_height: a.work_height,
+        ..ClipTrackOptions::default()
+    };
+    opts.silhouettes.background.empty = parse_empty_frames(&a.empty_frames)?;
+    opts.track.restarts = a.restarts;
+    opts.track.init_frame = a.init_frame;
+    opts.track.weights.edge = a.w_edge;
+    opts.track.weights.extremity = a.w_extremity;
+    opts.track.weights.region = a.w_region;
+    opts.track.features.core_weight = a.w_core;
+    if let Some(k) = &a.keyframes {
+        opts.track.keyframes = read_keyframes(k)?;
+    }
+
+    let bar = ProgressBar::with_draw_target(None, ProgressDrawTarget::stderr());
+    if !std::io::stderr().is_terminal() {
+        bar.set_draw_target(ProgressDrawTarget::hidden());
+    }
+    bar.set_style(
+        ProgressStyle::with_template(
+            "{spinner} [{elapsed_precise}] {bar:30} {pos}/{len} frames  {msg}  ETA {eta}",
+        )
+        .expect("a valid template"),
+    );
+    let start = std::time::Instant::now();
+    let done = track_clip(&a.clip, &opts, |f, p| {
+        if let Some(t) = p.frames_total {
+            bar.set_length(t as u64);
+        }
+        bar.set_position(p.frames_done as u64);
+        let cost = f
+            .cost
+            .map_or("no person".to_string(), |c| format!("cost {c:.0}"));
+        bar.set_message(format!("{:.1} frames/s  {cost}", p.fps));
+        std::ops::ControlFlow::Continue(())
+    })?;
+    bar.finish_and_clear();
+    let secs = start.elapsed().as_secs_f64();
+
+    let motion = MotionJson::new(&done.track, &done.camera, done.fps);
+    let write_json = |path: &std::path::Path| -> Result<()> {
+        let file =
+            File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
+        let mut w = BufWriter::new(file);
+        serde_json::to_writer(&mut w, &motion)?;
+        w.write_all(b"\n")?;
+        w.flush()
+            .with_context(|| format!("cannot write {}", path.display()))
+    };
+    match format {
+        MotionFormat::Json => write_json(&a.out)?,
+        MotionFormat::Bvh => {
+            let body = monocap::body::Body::new(&done.track.shape);
+            let poses: Vec<_> = done.track.frames.iter().map(|f| f.pose).collect();
+            let bvh = monocap::motion::export::monocap_bvh(&body.skeleton, &poses, done.fps)?;
+            let file = File::create(&a.out)
+                .with_context(|| format!("cannot create {}", a.out.display()))?;
+            let mut w = BufWriter::new(file);
+            bvh.write(&mut w)?;
+            w.flush()
+                .with_context(|| format!("cannot write {}", a.out.display()))?;
+        }
+    }
+    if let Some(p) = &a.json {
+        write_json(p)?;
+    }
+    if let Some(p) = &a.model_masks {
+        let cam = &done.camera;
+        let body = monocap::body::Body::new(&done.track.shape);
+        let mut out = write::create(p, cam.width, cam.height, done.fps)?;
+        let mut m = monocap::body::Mask::new(cam.width, cam.height);
+        for f in &done.track.frames {
+            m.clear();
+            if f.person {
+                monocap::body::raster::render_mask(&body, &body.posed(&f.pose), cam, &mut m);
+            }
+            out.push(write::Frame::Gray(&m.to_gray()))?;
+        }
+        out.finish()?;
+    }
+    let frames = done.track.frames.len();
+    let people = done.track.frames.iter().filter(|f| f.person).count();
+    let ious: Vec<f64> = done.track.frames.iter().filter_map(|f| f.iou).collect();
+    let mean_iou = ious.iter().sum::<f64>() / ious.len().max(1) as f64;
+    eprintln!(
+        "monocap: wrote {} ({frames} frames, {people} with a person, initialised on frame {}; mean IoU {mean_iou:.3}; {:.1} frames/s)",
+        a.out.display(),
+        done.track.init_frame,
+        frames as f64 / secs.max(1e-9)
     );
     Ok(())
 }

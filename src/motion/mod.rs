@@ -2,4 +2,5 @@
 
 pub mod bvh;
 pub mod export;
+pub mod json;
 pub mod retarget;

@@ -1,6 +1,9 @@
 //! The tracker (method.md §4–§5): fit the body model to every frame's silhouette.
 
+pub mod bench;
 pub mod keyframes;
 pub mod metrics;
 pub mod objective;
+pub mod run;
 pub mod simplex;
+pub mod tracker;

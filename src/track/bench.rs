@@ -1,0 +1,274 @@
+//! The accuracy benchmark (`monocap bench`): render clips of the body model driven by
+//! real motion capture (`monocap synth --style color`), extract their silhouettes as
+//! for any clip, track them, and compare with the capture.
+//!
+//! Joints compared: the 14 the capture and the model both define the same way — head,
+//! shoulders, elbows, wrists, hips, knees, ankles and the neck — taken from the
+//! capture's own forward kinematics (not from the model retargeted to it).
+//!
+//! - PCK@0.1: fraction of joints within 10% of the person's image height (the height
+//!   of the true silhouette's bounding box in that frame);
+//! - the same allowing a left/right swap of whole limbs (one view cannot tell them);
+//! - mean 2D error in % of the person's image height;
+//! - PA-MPJPE: mean 3D error after the per-frame similarity alignment, in mm;
+//! - IoU of the model's silhouette with the true silhouette;
+//! - lost frames: frames with a person whose PCK@0.1 (with swaps) is below 0.5.
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use image::RgbImage;
+
+use super::metrics::{self, Accumulator};
+use super::tracker::{FrameInput, TrackOptions, Tracker};
+use crate::body::skeleton::Joint;
+use crate::body::{Body, Camera, Mask};
+use crate::clip::write::Frame;
+use crate::motion::bvh::Bvh;
+use crate::motion::retarget::JointMap;
+use crate::synth::{synthesize_with, Style, SynthOptions};
+use crate::vision::silhouette::{Segmenter, SilhouetteOptions};
+
+/// The joints compared.
+pub const JOINTS: [Joint; 14] = [
+    Joint::Neck,
+    Joint::Head,
+    Joint::LeftArm,
+    Joint::LeftForeArm,
+    Joint::LeftHand,
+    Joint::RightArm,
+    Joint::RightForeArm,
+    Joint::RightHand,
+    Joint::LeftUpLeg,
+    Joint::LeftLeg,
+    Joint::LeftFoot,
+    Joint::RightUpLeg,
+    Joint::RightLeg,
+    Joint::RightFoot,
+];
+
+/// Left/right limb pairs, as indices into [`JOINTS`].
+const PAIRS: [(&[usize], &[usize]); 2] = [(&[2, 3, 4], &[5, 6, 7]), (&[8, 9, 10], &[11, 12, 13])];
+
+#[derive(Clone, Debug)]
+pub struct BenchOptions {
+    pub mocap_dir: PathBuf,
+    /// Only files whose name contains this.
+    pub filter: Option<String>,
+    pub azimuths: Vec<f64>,
+    /// Person-free lead-in frames, one clip per value.
+    pub lead_in: Vec<usize>,
+    pub duration_s: f64,
+    pub width: u32,
+    pub height: u32,
+    pub fps: f64,
+    pub fov_deg: f64,
+    /// Track the true silhouettes instead of extracted ones.
+    pub true_silhouettes: bool,
+    /// Skip the initialisation: start from the true shape and pose on the first
+    /// frame with the person (separates tracking errors from initialisation errors).
+    pub oracle_init: bool,
+    pub track: TrackOptions,
+}
+
+impl Default for BenchOptions {
+    fn default() -> Self {
+        BenchOptions {
+            mocap_dir: PathBuf::from("../shared/data/mocap"),
+            filter: None,
+            azimuths: vec![0.0, 60.0, -120.0],
+            lead_in: vec![10, 0],
+            duration_s: 3.5,
+            width: 320,
+            height: 240,
+            fps: 30.0,
+            fov_deg: 55.0,
+            true_silhouettes: false,
+            oracle_init: false,
+            track: TrackOptions::default(),
+        }
+    }
+}
+
+/// Results of one clip.
+#[derive(Clone, Debug)]
+pub struct ClipReport {
+    pub name: String,
+    pub acc: Accumulator,
+    pub lost: usize,
+    /// Mean IoU of the extracted silhouettes with the true ones.
+    pub silhouette_iou: f64,
+    /// Frames per second of tracking alone (features + search).
+    pub track_fps: f64,
+    /// Share of the tracking time spent in the search (the rest: features).
+    pub search_share: f64,
+    pub evals_per_frame: f64,
+}
+
+/// Runs the benchmark, handing each clip's report to `each` as it finishes.
+pub fn run(opts: &BenchOptions, mut each: impl FnMut(&ClipReport)) -> Result<Vec<ClipReport>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&opts.mocap_dir)
+        .with_context(|| format!("reading {}", opts.mocap_dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("bvh")))
+        .filter(|p| {
+            opts.filter.as_ref().is_none_or(|f| {
+                p.file_name()
+                    .is_some_and(|n| n.to_string_lossy().contains(f.as_str()))
+            })
+        })
+        .collect();
+    files.sort();
+    anyhow::ensure!(
+        !files.is_empty(),
+        "no BVH files in {}",
+        opts.mocap_dir.display()
+    );
+    let mut out = Vec::new();
+    for file in &files {
+        let bvh = Bvh::read(file).with_context(|| format!("reading {}", file.display()))?;
+        let name = file.file_name().unwrap_or_default().to_string_lossy();
+        for &az in &opts.azimuths {
+            for &lead in &opts.lead_in {
+                let r = run_clip(&bvh, &name, az, lead, opts)
+                    .with_context(|| format!("{name} azimuth {az} lead-in {lead}"))?;
+                each(&r);
+                out.push(r);
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// One clip: synthesise, segment, track, compare.
+pub fn run_clip(
+    bvh: &Bvh,
+    name: &str,
+    azimuth: f64,
+    lead: usize,
+    opts: &BenchOptions,
+) -> Result<ClipReport> {
+    let synth = SynthOptions {
+        width: opts.width,
+        height: opts.height,
+        fov_deg: opts.fov_deg,
+        fps: opts.fps,
+        style: Style::Color,
+        empty_frames: lead,
+        azimuth_deg: azimuth,
+        duration_s: Some(opts.duration_s),
+        ..SynthOptions::default()
+    };
+    let mut frames: Vec<RgbImage> = Vec::new();
+    let mut masks: Vec<Mask> = Vec::new();
+    let truth = synthesize_with(bvh, name, &synth, |f| {
+        let Frame::Rgb(img) = f.image else {
+            anyhow::bail!("a colour clip");
+        };
+        frames.push(img.clone());
+        masks.push(f.mask.clone());
+        Ok(())
+    })?;
+    let (w, h) = (opts.width, opts.height);
+    let silhouettes: Vec<Mask> = if opts.true_silhouettes {
+        masks.clone()
+    } else {
+        let seg = Segmenter::learn(w, h, &SilhouetteOptions::default(), |visit| {
+            frames.iter().for_each(&mut *visit);
+            Ok::<_, ()>(())
+        })
+        .map_err(|_| anyhow::anyhow!("segmenting"))?;
+        frames
+            .iter()
+            .map(|f| {
+                let mut m = Mask::new(w, h);
+                seg.silhouette(f, &mut m);
+                m
+            })
+            .collect()
+    };
+    let mut sil_iou = 0.0;
+    let mut sil_n = 0;
+    for (s, t) in silhouettes.iter().zip(&masks).skip(lead) {
+        sil_iou += s.iou(t);
+        sil_n += 1;
+    }
+
+    let camera = Camera::new(w, h, opts.fov_deg);
+    let mut track_opts = opts.track.clone();
+    track_opts.fps = opts.fps;
+    if opts.oracle_init {
+        let tf = &truth.frames[0];
+        let mut shape = [0.0; 12];
+        shape.copy_from_slice(&truth.shape.values);
+        let mut pose = [0.0; 30];
+        pose.copy_from_slice(&tf.params);
+        track_opts.init_frame = Some(tf.index);
+        track_opts.initial = Some((shape, pose));
+    }
+    let tracker = Tracker::new(camera.clone(), track_opts);
+    let n = frames.len();
+    let inputs = silhouettes
+        .into_iter()
+        .zip(frames)
+        .map(|(silhouette, image)| {
+            Ok(FrameInput {
+                silhouette,
+                image: Some(image),
+            })
+        });
+    let started = Instant::now();
+    let track = tracker
+        .track(inputs, Some(n), |_, _| std::ops::ControlFlow::Continue(()))
+        .map_err(anyhow::Error::from)?;
+    let secs = started.elapsed().as_secs_f64();
+
+    let map = JointMap::detect(bvh)?;
+    let body = Body::new(&track.shape);
+    let mut report = ClipReport {
+        name: format!("{name} az {azimuth:+.0} lead {lead}"),
+        acc: Accumulator::default(),
+        lost: 0,
+        silhouette_iou: if sil_n > 0 {
+            sil_iou / sil_n as f64
+        } else {
+            0.0
+        },
+        track_fps: n as f64 / secs.max(1e-9),
+        search_share: track.timing.search / (track.timing.search + track.timing.features).max(1e-9),
+        evals_per_frame: track.timing.evals as f64 / n as f64,
+    };
+    for tf in &truth.frames {
+        let f = &track.frames[tf.index];
+        let posed = body.posed(&f.pose);
+        let mut pred2 = Vec::new();
+        let mut pred3 = Vec::new();
+        let mut true2 = Vec::new();
+        let mut true3 = Vec::new();
+        for j in JOINTS {
+            let p = posed.joint(j);
+            pred3.push(camera.to_contract(&p));
+            pred2.push(camera.project(&p).unwrap_or([f64::NAN; 2]));
+            let s = map.source[j.index()];
+            true3.push(tf.joints3d[s]);
+            true2.push(tf.joints2d[s]);
+        }
+        let height = mask_height(&masks[tf.index]).max(1.0);
+        let plain = metrics::pck_frame(&pred2, &true2, height, 0.1);
+        let swapped = metrics::pck_frame_swapped(&pred2, &true2, height, 0.1, &PAIRS);
+        let pa = metrics::pa_mpjpe(&pred3, &true3) * 10.0;
+        let mut model = Mask::new(w, h);
+        crate::body::raster::render_mask(&body, &posed, &camera, &mut model);
+        let iou = model.iou(&masks[tf.index]);
+        if swapped.pck() < 0.5 {
+            report.lost += 1;
+        }
+        report.acc.add_frame(&plain, &swapped, pa, iou);
+    }
+    Ok(report)
+}
+
+fn mask_height(m: &Mask) -> f64 {
+    super::tracker::mask_bbox(m).map_or(0.0, |b| (b[3] - b[1] + 1) as f64)
+}

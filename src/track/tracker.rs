@@ -1,0 +1,767 @@
+//! The tracker (method.md §5): initialise on one frame, then fit every frame from
+//! its neighbour's solution with the biased, hierarchical downhill simplex.
+//!
+//! Frames arrive as a stream ([`FrameInput`]: the silhouette and, for a colour clip,
+//! the frame, at the working resolution). What is kept, and why:
+//!
+//! - until the initial frame is chosen, each frame's [`Target`] (about 5 bytes a
+//!   pixel): the frames before it are tracked backwards from it once it is fitted.
+//!   The automatic choice looks at most [`TrackOptions::init_window`] frames with a
+//!   person, so this buffer is bounded; a user-chosen initial frame must lie within
+//!   the first [`MAX_INIT_FRAME`] frames;
+//! - after that, only the previous frame's features (temporal coherence of the
+//!   extremity candidates) and one pose per frame.
+//!
+//! Per frame: the search starts at the previous solution moved by the parameter
+//! velocity (when that is not worse than the previous solution itself), or at a
+//! keyframe's interpolation; the search box around it is bounded by per-parameter
+//! acceleration limits, and the simplex's vertex offsets are the parameters' length
+//! scales, capped by that box. The groups are searched one after another (global,
+//! torso, arms, legs), and the whole pass repeats `restarts` times from the solution
+//! just found.
+
+use std::ops::ControlFlow;
+use std::time::Instant;
+
+use image::RgbImage;
+
+use super::keyframes::{KeyframeError, Keyframes};
+use super::objective::{sole_height, Evaluator, Target, Weights};
+use super::simplex::{minimize, SimplexOptions};
+use crate::body::params::{
+    ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE, SHAPE_COUNT,
+    STANDARD_SHAPE,
+};
+use crate::body::skeleton::{standard_rest, Tip};
+use crate::body::{Body, Camera, Mask};
+use crate::vision::features::{compute, FeatureOptions, FrameFeatures};
+
+/// Latest user-chosen initial frame (frames before it are buffered).
+pub const MAX_INIT_FRAME: usize = 1800;
+
+/// Tuning of the tracker. Defaults follow the paper where it gives a value.
+#[derive(Clone, Debug)]
+pub struct TrackOptions {
+    pub weights: Weights,
+    /// Runs of the hierarchical search per frame (the paper's restarts; 3).
+    pub restarts: usize,
+    /// Simplex evaluations per group and run, per parameter of the group (plus one).
+    pub evals_per_param: usize,
+    /// The initial frame (None: chosen automatically).
+    pub init_frame: Option<usize>,
+    /// Frames with a person looked at when choosing the initial frame.
+    pub init_window: usize,
+    /// Frames per second of the clip (scales the acceleration limits).
+    pub fps: f64,
+    /// Multiplier of the per-parameter acceleration limits (reach of the search box
+    /// around the predicted pose, in length scales per frame² at 30 fps).
+    pub reach: f64,
+    pub keyframes: Keyframes,
+    pub features: FeatureOptions,
+    /// Skip the initialisation: start from this shape and pose on the initial frame
+    /// (experiments that separate initialisation from tracking).
+    pub initial: Option<(ShapeValues, Pose)>,
+}
+
+impl Default for TrackOptions {
+    fn default() -> Self {
+        TrackOptions {
+            weights: Weights::default(),
+            restarts: 3,
+            evals_per_param: 25,
+            init_frame: None,
+            init_window: 60,
+            fps: 30.0,
+            reach: 3.0,
+            keyframes: Keyframes::default(),
+            features: FeatureOptions::default(),
+            initial: None,
+        }
+    }
+}
+
+/// One frame of input at the working resolution.
+pub struct FrameInput {
+    pub silhouette: Mask,
+    /// The colour frame, when the clip has one (for the edge map).
+    pub image: Option<RgbImage>,
+}
+
+/// The result for one frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackedFrame {
+    pub index: usize,
+    /// False when the frame shows no person: its pose is then held from the nearest
+    /// tracked frame and it has no cost or IoU.
+    pub person: bool,
+    pub pose: Pose,
+    pub cost: Option<f64>,
+    pub iou: Option<f64>,
+    /// A keyframe applied to this frame's start pose.
+    pub keyframe: bool,
+}
+
+/// Progress after each frame.
+#[derive(Clone, Copy, Debug)]
+pub struct Progress {
+    pub frames_done: usize,
+    pub frames_total: Option<usize>,
+    /// Frames per second since tracking began.
+    pub fps: f64,
+}
+
+/// Where the time went (seconds).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct Timing {
+    /// Silhouette features and the objective's per-frame maps.
+    pub features: f64,
+    /// The search (objective evaluations and simplex bookkeeping).
+    pub search: f64,
+    /// Of the search: evaluations of the objective.
+    pub evals: u64,
+    pub total: f64,
+}
+
+/// A tracked clip.
+#[derive(Clone, Debug)]
+pub struct Track {
+    pub camera: Camera,
+    pub shape: ShapeValues,
+    pub init_frame: usize,
+    /// World y of the ground found at initialisation.
+    pub ground: f64,
+    pub frames: Vec<TrackedFrame>,
+    pub timing: Timing,
+}
+
+#[derive(Debug, thiserror::Error)]
+pub enum TrackError {
+    #[error("the clip has no frames")]
+    Empty,
+    #[error("no person found in any of the clip's {0} frames")]
+    NoPerson(usize),
+    #[error("initial frame {frame} is outside the clip, which has {count} frames")]
+    InitOutside { frame: usize, count: usize },
+    #[error("initial frame {0} must be one of the first {MAX_INIT_FRAME} frames")]
+    InitTooLate(usize),
+    #[error("initial frame {0} shows no person")]
+    InitNoPerson(usize),
+    #[error(transparent)]
+    Keyframes(#[from] KeyframeError),
+    #[error("frame {index} is {width}×{height}, the tracker works at {expected_w}×{expected_h}")]
+    FrameSize {
+        index: usize,
+        width: u32,
+        height: u32,
+        expected_w: u32,
+        expected_h: u32,
+    },
+    #[error("canceled")]
+    Canceled,
+    #[error(transparent)]
+    Input(anyhow::Error),
+}
+
+/// Fits the body model to a stream of silhouettes.
+pub struct Tracker {
+    pub camera: Camera,
+    pub opts: TrackOptions,
+}
+
+/// A buffered frame before initialisation.
+struct Pending {
+    target: Target,
+    score: f64,
+}
+
+impl Tracker {
+    pub fn new(camera: Camera, opts: TrackOptions) -> Tracker {
+        Tracker { camera, opts }
+    }
+
+    /// Tracks every frame of `frames`, calling `on_frame` after each (frames before
+    /// the initial frame are reported after it, in backward order; return
+    /// `ControlFlow::Break` to cancel). `total`, when known, is reported in progress.
+    pub fn track(
+        &self,
+        frames: impl Iterator<Item = anyhow::Result<FrameInput>>,
+        total: Option<usize>,
+        mut on_frame: impl FnMut(&TrackedFrame, &Progress) -> ControlFlow<()>,
+    ) -> Result<Track, TrackError> {
+        let started = Instant::now();
+        let mut timing = Timing::default();
+        let (w, h) = (self.camera.width, self.camera.height);
+        if let (Some(f), Some(t)) = (self.opts.init_frame, total) {
+            if f >= t {
+                return Err(TrackError::InitOutside { frame: f, count: t });
+            }
+        }
+        if let Some(f) = self.opts.init_frame {
+            if f >= MAX_INIT_FRAME {
+                return Err(TrackError::InitTooLate(f));
+            }
+        }
+        if let Some(t) = total {
+            self.opts.keyframes.check_frames(t)?;
+        }
+        let mut frames = frames.enumerate();
+        let mut prev_features: Option<FrameFeatures> = None;
+        let next_target = |index: usize,
+                           input: FrameInput,
+                           prev: &mut Option<FrameFeatures>,
+                           timing: &mut Timing|
+         -> Result<(Target, f64), TrackError> {
+            if input.silhouette.width() != w || input.silhouette.height() != h {
+                return Err(TrackError::FrameSize {
+                    index,
+                    width: input.silhouette.width(),
+                    height: input.silhouette.height(),
+                    expected_w: w,
+                    expected_h: h,
+                });
+            }
+            let t0 = Instant::now();
+            let f = compute(
+                &input.silhouette,
+                input.image.as_ref(),
+                prev.as_ref(),
+                &self.opts.features,
+            );
+            let score = init_score(&f);
+            let target = Target::new(&f, &self.opts.weights);
+            *prev = Some(f);
+            timing.features += t0.elapsed().as_secs_f64();
+            Ok((target, score))
+        };
+
+        // Phase 1: buffer frames until the initial frame is known.
+        let mut pending: Vec<Pending> = Vec::new();
+        let mut person_frames = 0;
+        let mut exhausted = false;
+        loop {
+            let enough = match self.opts.init_frame {
+                Some(f) => pending.len() > f,
+                None => person_frames >= self.opts.init_window.max(1),
+            };
+            if enough {
+                break;
+            }
+            let Some((i, input)) = frames.next() else {
+                exhausted = true;
+                break;
+            };
+            let input = input.map_err(TrackError::Input)?;
+            let (target, score) = next_target(i, input, &mut prev_features, &mut timing)?;
+            if target.has_person() {
+                person_frames += 1;
+            }
+            pending.push(Pending { target, score });
+        }
+        if pending.is_empty() {
+            return Err(TrackError::Empty);
+        }
+        let init = match self.opts.init_frame {
+            Some(f) if f >= pending.len() => {
+                return Err(TrackError::InitOutside {
+                    frame: f,
+                    count: pending.len(),
+                })
+            }
+            Some(f) => {
+                if !pending[f].target.has_person() {
+                    return Err(TrackError::InitNoPerson(f));
+                }
+                f
+            }
+            None => {
+                // The best-scoring frame; the earliest among equals.
+                let best = pending
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, p)| p.target.has_person())
+                    .max_by(|a, b| a.1.score.total_cmp(&b.1.score).then(b.0.cmp(&a.0)));
+                match best {
+                    Some((i, _)) => i,
+                    None if exhausted => return Err(TrackError::NoPerson(pending.len())),
+                    None => unreachable!("the window ends only after a person frame"),
+                }
+            }
+        };
+
+        // Phase 2: initialise.
+        let t0 = Instant::now();
+        let (shape, init_pose) = match self.opts.initial {
+            Some(given) => given,
+            None => self.initialise(&pending[init].target),
+        };
+        let body = Body::new(&shape);
+        let ground = sole_height(&body, &body.posed(&init_pose));
+        let mut search = Search {
+            tracker: self,
+            body: &body,
+            ground,
+            evals: 0,
+        };
+        let mut results: Vec<Option<TrackedFrame>> = vec![None; pending.len()];
+        let mut done = 0usize;
+        let mut emit =
+            |frame: TrackedFrame, done: &mut usize| -> Result<TrackedFrame, TrackError> {
+                *done += 1;
+                let secs = started.elapsed().as_secs_f64();
+                let progress = Progress {
+                    frames_done: *done,
+                    frames_total: total,
+                    fps: if secs > 0.0 { *done as f64 / secs } else { 0.0 },
+                };
+                match on_frame(&frame, &progress) {
+                    ControlFlow::Continue(()) => Ok(frame),
+                    ControlFlow::Break(()) => Err(TrackError::Canceled),
+                }
+            };
+        // A keyframe on the initial frame overrides what initialisation found.
+        let mut init_pose = init_pose;
+        let init_key = self.opts.keyframes.at(init).is_some();
+        if init_key {
+            let mut history = History::new(init_pose);
+            init_pose = search.step(init, &pending[init].target, &mut history).pose;
+        }
+        let (cost, iou) = search.measure(&pending[init].target, &init_pose);
+        let first = TrackedFrame {
+            index: init,
+            person: true,
+            pose: init_pose,
+            cost: Some(cost),
+            iou: Some(iou),
+            keyframe: init_key,
+        };
+        results[init] = Some(emit(first, &mut done)?);
+        timing.search += t0.elapsed().as_secs_f64();
+
+        // Phase 3: backwards from the initial frame, then forwards over the buffer.
+        let t0 = Instant::now();
+        let mut history = History::new(init_pose);
+        for i in (0..init).rev() {
+            let f = search.step(i, &pending[i].target, &mut history);
+            results[i] = Some(emit(f, &mut done)?);
+        }
+        let mut history = History::new(init_pose);
+        for (i, p) in pending.iter().enumerate().skip(init + 1) {
+            let f = search.step(i, &p.target, &mut history);
+            results[i] = Some(emit(f, &mut done)?);
+        }
+        timing.search += t0.elapsed().as_secs_f64();
+        drop(pending);
+
+        // Phase 4: stream the rest.
+        let mut out: Vec<TrackedFrame> = results.into_iter().map(|r| r.expect("tracked")).collect();
+        for (i, input) in frames {
+            let input = input.map_err(TrackError::Input)?;
+            let (target, _) = next_target(i, input, &mut prev_features, &mut timing)?;
+            let t0 = Instant::now();
+            let f = search.step(i, &target, &mut history);
+            timing.search += t0.elapsed().as_secs_f64();
+            out.push(emit(f, &mut done)?);
+        }
+        if let Some(t) = total {
+            if out.len() != t {
+                // The container's count was off; keyframes are checked against the truth.
+                self.opts.keyframes.check_frames(out.len())?;
+            }
+        } else {
+            self.opts.keyframes.check_frames(out.len())?;
+        }
+        hold_missing(&mut out);
+        timing.evals = search.evals;
+        timing.total = started.elapsed().as_secs_f64();
+        Ok(Track {
+            camera: self.camera.clone(),
+            shape,
+            init_frame: init,
+            ground,
+            frames: out,
+            timing,
+        })
+    }
+
+    /// Initialisation (method.md §5, paper §5.1) on one frame: place the standard
+    /// body from the silhouette's bounding box, fit the pose from several headings
+    /// (the silhouette does not say which way the person faces) and keep the best,
+    /// then fit the 12 shape values with the root translation, and the pose again.
+    pub fn initialise(&self, target: &Target) -> (ShapeValues, Pose) {
+        let cam = &self.camera;
+        let bbox = mask_bbox(&target.silhouette).expect("a person");
+        let (_, rest) = standard_rest();
+        let standard = Body::new(&STANDARD_SHAPE);
+        let posed = standard.posed(&rest);
+        let top = posed.tips[Tip::HeadTop as usize].y;
+        let sole = sole_height(&standard, &posed);
+        let tall = top - sole;
+        let hip_up = rest[ix::ROOT_TY] - sole;
+        let h_px = (bbox[3] - bbox[1] + 1) as f64;
+        let depth = cam.fy * tall / h_px;
+        let u = (bbox[0] + bbox[2] + 1) as f64 / 2.0;
+        let v_hips = (bbox[3] + 1) as f64 - h_px * hip_up / tall;
+        let mut base = rest_pose();
+        base[ix::ROOT_TX] = (u - cam.cx) * depth / cam.fx;
+        base[ix::ROOT_TY] = (cam.cy - v_hips) * depth / cam.fy;
+        base[ix::ROOT_TZ] = -depth;
+        base[ix::L_SHOULDER + 1] = 15.0;
+        base[ix::R_SHOULDER + 1] = 15.0;
+
+        let wide = Search {
+            tracker: self,
+            body: &standard,
+            ground: f64::NEG_INFINITY,
+            evals: 0,
+        };
+        let mut fits: Vec<(f64, Pose)> = (0..12)
+            .map(|k| {
+                let mut p = base;
+                p[ix::ROOT_RY] = k as f64 * 30.0 - 150.0;
+                let (pose, cost) = wide.fit_wide(target, p, 2);
+                (cost, pose)
+            })
+            .collect();
+        fits.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (_, mut pose) = fits
+            .iter()
+            .take(3)
+            .map(|(_, p)| {
+                let (pose, cost) = wide.fit_wide(target, *p, 3);
+                (cost, pose)
+            })
+            .min_by(|a, b| a.0.total_cmp(&b.0))
+            .expect("twelve headings");
+
+        // Shape with the root translation, alternating with the pose.
+        let mut shape = STANDARD_SHAPE;
+        for _ in 0..2 {
+            let mut x0: Vec<f64> = shape.to_vec();
+            x0.extend_from_slice(&pose[ix::ROOT_TX..=ix::ROOT_TZ]);
+            let mut steps: Vec<f64> = SHAPE.iter().map(|s| s.scale).collect();
+            steps.extend_from_slice(&[2.0, 2.0, 8.0]);
+            let mut lo: Vec<f64> = SHAPE.iter().map(|s| s.lo).collect();
+            let mut hi: Vec<f64> = SHAPE.iter().map(|s| s.hi).collect();
+            for v in &pose[ix::ROOT_TX..=ix::ROOT_TZ] {
+                lo.push(v - 50.0);
+                hi.push(v + 50.0);
+            }
+            let fixed = pose;
+            let r = minimize(
+                |x| {
+                    let mut s = [0.0; SHAPE_COUNT];
+                    s.copy_from_slice(&x[..SHAPE_COUNT]);
+                    let mut p = fixed;
+                    p[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&x[SHAPE_COUNT..]);
+                    let body = Body::new(&s);
+                    Evaluator::new(&body, cam, target, self.opts.weights, None).cost(&p)
+                },
+                &x0,
+                &steps,
+                &lo,
+                &hi,
+                &simplex_options(1200),
+            );
+            shape.copy_from_slice(&r.x[..SHAPE_COUNT]);
+            pose[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&r.x[SHAPE_COUNT..]);
+            let body = Body::new(&shape);
+            let s = Search {
+                tracker: self,
+                body: &body,
+                ground: f64::NEG_INFINITY,
+                evals: 0,
+            };
+            pose = s.fit_wide(target, pose, 2).0;
+        }
+        (shape, pose)
+    }
+}
+
+/// How suitable a frame is for initialisation: the person whole and apart (both
+/// hands, both feet and the head found, legs apart), not touching the border.
+fn init_score(f: &FrameFeatures) -> f64 {
+    use crate::vision::features::ExtremityKind as K;
+    let Some(bbox) = f.bbox else {
+        return f64::NEG_INFINITY;
+    };
+    let count = |k: K| f.extremities.iter().filter(|e| e.kind == k).count().min(2) as f64;
+    let mut s = count(K::Hand) + count(K::Foot);
+    if f.head.is_some() {
+        s += 1.0;
+    }
+    if f.crotch.is_some() {
+        s += 1.0;
+    }
+    if bbox[0] == 0 || bbox[1] == 0 || bbox[2] + 1 >= f.width || bbox[3] + 1 >= f.height {
+        s -= 3.0;
+    }
+    // Among equals, a larger person (nearer, better resolved) wins slightly.
+    s + 1e-4 * f.body_height
+}
+
+/// The previous solutions a frame's prediction is made from.
+struct History {
+    last: Pose,
+    before: Option<Pose>,
+}
+
+impl History {
+    fn new(pose: Pose) -> History {
+        History {
+            last: pose,
+            before: None,
+        }
+    }
+
+    fn push(&mut self, pose: Pose) {
+        self.before = Some(self.last);
+        self.last = pose;
+    }
+
+    /// Forget the velocity (after frames without a person).
+    fn gap(&mut self) {
+        self.before = None;
+    }
+}
+
+struct Search<'a> {
+    tracker: &'a Tracker,
+    body: &'a Body,
+    ground: f64,
+    evals: u64,
+}
+
+impl Search<'_> {
+    fn evaluator<'b>(&'b self, target: &'b Target) -> Evaluator<'b> {
+        let ground = self.ground.is_finite().then_some(self.ground);
+        Evaluator::new(
+            self.body,
+            &self.tracker.camera,
+            target,
+            self.tracker.opts.weights,
+            ground,
+        )
+    }
+
+    /// Cost and IoU of `pose` on `target`.
+    fn measure(&self, target: &Target, pose: &Pose) -> (f64, f64) {
+        let mut ev = self.evaluator(target);
+        (ev.cost(pose), ev.iou(pose))
+    }
+
+    /// Tracks one frame from the history (its neighbour in time).
+    fn step(&mut self, index: usize, target: &Target, history: &mut History) -> TrackedFrame {
+        if !target.has_person() {
+            history.gap();
+            return TrackedFrame {
+                index,
+                person: false,
+                pose: history.last,
+                cost: None,
+                iou: None,
+                keyframe: false,
+            };
+        }
+        let opts = &self.tracker.opts;
+        let prev = history.last;
+        let mut predicted = prev;
+        if let Some(before) = history.before {
+            for k in 0..MOTION_COUNT {
+                predicted[k] += prev[k] - before[k];
+            }
+        }
+        let (keyed, keyframe) = opts.keyframes.start_pose(index, &predicted);
+        let mut fixed = [false; MOTION_COUNT];
+        if let Some(kf) = opts.keyframes.at(index) {
+            for &(k, _) in &kf.params {
+                fixed[k] = true;
+            }
+        }
+        let mut ev = self.evaluator(target);
+        // Start from the prediction unless the plain previous pose explains the
+        // frame better (a velocity estimate can be wrong).
+        let mut start = keyed;
+        let mut best_f = ev.cost(&keyed);
+        if !keyframe {
+            let f_prev = ev.cost(&prev);
+            if f_prev < best_f {
+                start = prev;
+                best_f = f_prev;
+            }
+        }
+        // The reach of the search: acceleration limits around the prediction.
+        let scale = (30.0 / opts.fps.max(1.0)).powi(2);
+        let mut lo = [0.0; MOTION_COUNT];
+        let mut hi = [0.0; MOTION_COUNT];
+        for k in 0..MOTION_COUNT {
+            let reach = opts.reach * MOTION[k].scale * scale;
+            lo[k] = (start[k] - reach).max(MOTION[k].lo);
+            hi[k] = (start[k] + reach).min(MOTION[k].hi);
+            if fixed[k] {
+                lo[k] = start[k];
+                hi[k] = start[k];
+            }
+        }
+        let mut best = start;
+        self.hierarchical(&mut ev, &mut best, &mut best_f, &lo, &hi, opts.restarts);
+        let iou = ev.iou(&best);
+        let spent = ev.evals;
+        self.evals += spent;
+        history.push(best);
+        TrackedFrame {
+            index,
+            person: true,
+            pose: best,
+            cost: Some(best_f),
+            iou: Some(iou),
+            keyframe,
+        }
+    }
+
+    /// `runs` passes of the group-by-group search within [lo, hi]; returns the
+    /// evaluations spent.
+    fn hierarchical(
+        &self,
+        ev: &mut Evaluator,
+        best: &mut Pose,
+        best_f: &mut f64,
+        lo: &Pose,
+        hi: &Pose,
+        runs: usize,
+    ) -> u64 {
+        let opts = &self.tracker.opts;
+        let before = ev.evals;
+        for _ in 0..runs.max(1) {
+            for g in Group::ALL {
+                let params: Vec<usize> = g.range().filter(|&k| lo[k] < hi[k]).collect();
+                let budget = opts.evals_per_param * (params.len() + 1);
+                self.simplex_over(ev, best, best_f, &params, lo, hi, budget);
+            }
+        }
+        ev.unfocus();
+        ev.evals - before
+    }
+
+    /// One simplex over `params` from `best` within [lo, hi]; keeps the result when
+    /// it is better.
+    #[allow(clippy::too_many_arguments)]
+    fn simplex_over(
+        &self,
+        ev: &mut Evaluator,
+        best: &mut Pose,
+        best_f: &mut f64,
+        params: &[usize],
+        lo: &Pose,
+        hi: &Pose,
+        max_evals: usize,
+    ) {
+        if params.is_empty() {
+            return;
+        }
+        ev.focus(best, params);
+        let x0: Vec<f64> = params.iter().map(|&k| best[k]).collect();
+        let steps: Vec<f64> = params
+            .iter()
+            .map(|&k| MOTION[k].scale.min((hi[k] - lo[k]) / 2.0))
+            .collect();
+        let l: Vec<f64> = params.iter().map(|&k| lo[k]).collect();
+        let u: Vec<f64> = params.iter().map(|&k| hi[k]).collect();
+        let base = *best;
+        let res = minimize(
+            |x| {
+                let mut p = base;
+                for (&k, v) in params.iter().zip(x) {
+                    p[k] = *v;
+                }
+                ev.cost(&p)
+            },
+            &x0,
+            &steps,
+            &l,
+            &u,
+            &simplex_options(max_evals),
+        );
+        if res.f < *best_f {
+            *best_f = res.f;
+            for (&k, v) in params.iter().zip(&res.x) {
+                best[k] = *v;
+            }
+        }
+    }
+
+    /// Fits a pose with the search box spanning the joint limits (initialisation).
+    fn fit_wide(&self, target: &Target, start: Pose, runs: usize) -> (Pose, f64) {
+        let mut ev = self.evaluator(target);
+        let mut lo = [0.0; MOTION_COUNT];
+        let mut hi = [0.0; MOTION_COUNT];
+        for k in 0..MOTION_COUNT {
+            lo[k] = MOTION[k].lo;
+            hi[k] = MOTION[k].hi;
+        }
+        for k in ix::ROOT_TX..=ix::ROOT_TZ {
+            lo[k] = start[k] - 100.0;
+            hi[k] = start[k] + 100.0;
+        }
+        lo[ix::ROOT_RY] = start[ix::ROOT_RY] - 60.0;
+        hi[ix::ROOT_RY] = start[ix::ROOT_RY] + 60.0;
+        let mut best = start;
+        let mut best_f = ev.cost(&start);
+        self.hierarchical(&mut ev, &mut best, &mut best_f, &lo, &hi, runs);
+        (best, best_f)
+    }
+}
+
+/// The simplex's stopping rules for this objective: a sum of large terms of both
+/// signs, so only an absolute tolerance on the cost means anything.
+fn simplex_options(max_evals: usize) -> SimplexOptions {
+    SimplexOptions {
+        max_evals,
+        ftol: 0.0,
+        abs_tol: 0.5,
+        xtol: 0.01,
+    }
+}
+
+/// Frames without a person take the pose of the nearest tracked frame (earlier
+/// frames first).
+fn hold_missing(frames: &mut [TrackedFrame]) {
+    let Some(first) = frames.iter().position(|f| f.person) else {
+        return;
+    };
+    let pose = frames[first].pose;
+    for f in &mut frames[..first] {
+        f.pose = pose;
+    }
+    let mut last = pose;
+    for f in &mut frames[first..] {
+        if f.person {
+            last = f.pose;
+        } else {
+            f.pose = last;
+        }
+    }
+}
+
+/// Inclusive bounding box [x0, y0, x1, y1] of a mask's set pixels.
+pub fn mask_bbox(m: &Mask) -> Option<[u32; 4]> {
+    let mut b: Option<[u32; 4]> = None;
+    for y in 0..m.height() {
+        for (k, &word) in m.row(y).iter().enumerate() {
+            if word == 0 {
+                continue;
+            }
+            let x0 = k as u32 * 64 + word.trailing_zeros();
+            let x1 = k as u32 * 64 + 63 - word.leading_zeros();
+            b = Some(match b {
+                None => [x0, y, x1, y],
+                Some([a, c, d, _]) => [a.min(x0), c, d.max(x1), y],
+            });
+        }
+    }
+    b
+}
+
+/// The shape values' names, in order (for reports).
+pub fn shape_names() -> [&'static str; SHAPE_COUNT] {
+    std::array::from_fn(|i| SHAPE[i].name)
+}

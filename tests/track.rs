@@ -1,0 +1,362 @@
+//! The tracker end to end, and `monocap track` (contracts.md): outputs, and bad input
+//! that must give one clear line and a non-zero exit, never a panic.
+
+mod common;
+
+use std::ops::ControlFlow;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use common::TempDir;
+use monocap::body::{Body, Camera, Mask};
+use monocap::clip::write::{self, Frame};
+use monocap::motion::bvh::Bvh;
+use monocap::motion::json::MotionJson;
+use monocap::synth::{synthesize_with, Style, SynthOptions};
+use monocap::track::metrics;
+use monocap::track::tracker::{FrameInput, TrackOptions, Tracker};
+
+const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
+
+fn monocap(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_monocap"))
+        .args(args)
+        .output()
+        .expect("the monocap binary runs")
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Non-zero exit, one line on stderr mentioning `needle`, no panic.
+fn assert_fails_with(what: &str, out: &Output, needle: &str) {
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    println!("{what}: {:?} {}", out.status.code(), stderr.trim_end());
+    assert!(!out.status.success(), "{what}: succeeded");
+    assert!(!stderr.contains("panicked"), "{what}: panicked: {stderr}");
+    assert_eq!(stderr.lines().count(), 1, "{what}: {stderr:?}");
+    assert!(
+        stderr.contains(needle),
+        "{what}: {stderr:?} lacks {needle:?}"
+    );
+}
+
+/// A 20-frame synthetic silhouette clip of a run, tracked from its masks: the model
+/// must follow it (IoU and joint positions against the capture's truth).
+#[test]
+fn a_short_synthetic_clip_tracks_end_to_end() {
+    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
+    let opts = SynthOptions {
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let mut masks = Vec::new();
+    let truth = synthesize_with(&bvh, "fixture", &opts, |f| {
+        masks.push(f.mask.clone());
+        Ok(())
+    })
+    .unwrap();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let tracker = Tracker::new(cam.clone(), TrackOptions::default());
+    let mut reported = Vec::new();
+    let inputs = masks.iter().map(|m| {
+        Ok(FrameInput {
+            silhouette: m.clone(),
+            image: None,
+        })
+    });
+    let track = tracker
+        .track(inputs, Some(masks.len()), |f, p| {
+            reported.push((f.index, p.frames_done));
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+    assert_eq!(track.frames.len(), masks.len());
+    assert_eq!(reported.len(), masks.len(), "one progress report per frame");
+    assert!(reported.iter().enumerate().all(|(i, r)| r.1 == i + 1));
+
+    let body = Body::new(&track.shape);
+    let pairs: [(&[usize], &[usize]); 2] =
+        [(&[4, 5, 6], &[7, 8, 9]), (&[10, 11, 12], &[14, 15, 16])];
+    let (mut iou, mut pck) = (0.0, 0.0);
+    for tf in &truth.frames {
+        let f = &track.frames[tf.index];
+        assert!(f.person);
+        let mut m = Mask::new(cam.width, cam.height);
+        monocap::body::raster::render_mask(&body, &body.posed(&f.pose), &cam, &mut m);
+        iou += m.iou(&masks[tf.index]);
+        let (_, pred) = monocap::motion::json::joints(&body, &cam, &f.pose);
+        let pred: Vec<[f64; 2]> = pred.into_iter().map(Option::unwrap).collect();
+        let height = monocap::track::tracker::mask_bbox(&masks[tf.index])
+            .map(|b| (b[3] - b[1] + 1) as f64)
+            .unwrap();
+        pck += metrics::pck_frame_swapped(&pred, &tf.model_joints2d, height, 0.1, &pairs).pck();
+    }
+    let n = truth.frames.len() as f64;
+    let (iou, pck) = (iou / n, pck / n);
+    println!("20-frame run: mean IoU {iou:.3}, PCK@0.1 (swaps allowed) {pck:.3}");
+    assert!(iou >= 0.75, "mean IoU {iou:.3}");
+    assert!(pck >= 0.8, "PCK {pck:.3}");
+}
+
+#[test]
+fn canceling_stops_the_tracker() {
+    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
+    let opts = SynthOptions {
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let mut masks = Vec::new();
+    synthesize_with(&bvh, "fixture", &opts, |f| {
+        masks.push(f.mask.clone());
+        Ok(())
+    })
+    .unwrap();
+    let o = TrackOptions {
+        restarts: 1,
+        ..TrackOptions::default()
+    };
+    let tracker = Tracker::new(Camera::new(320, 240, 55.0), o);
+    let inputs = masks.iter().map(|m| {
+        Ok(FrameInput {
+            silhouette: m.clone(),
+            image: None,
+        })
+    });
+    let mut seen = 0;
+    let r = tracker.track(inputs, None, |_, _| {
+        seen += 1;
+        if seen == 3 {
+            ControlFlow::Break(())
+        } else {
+            ControlFlow::Continue(())
+        }
+    });
+    assert!(matches!(
+        r,
+        Err(monocap::track::tracker::TrackError::Canceled)
+    ));
+    assert_eq!(seen, 3);
+}
+
+#[test]
+fn track_writes_bvh_json_and_model_masks() {
+    let dir = TempDir::new("track");
+    let clip = dir.path("run.zip");
+    let out = monocap(&[
+        "synth",
+        "--bvh",
+        FIXTURE,
+        "--out",
+        s(&clip),
+        "--style",
+        "silhouette",
+        "--empty-frames",
+        "3",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let (bvh, json, mm) = (dir.path("m.bvh"), dir.path("m.json"), dir.path("mm.zip"));
+    let out = monocap(&[
+        "track",
+        s(&clip),
+        "-o",
+        s(&bvh),
+        "--json",
+        s(&json),
+        "--model-masks",
+        s(&mm),
+        "--restarts",
+        "1",
+    ]);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    let b = Bvh::read(&bvh).unwrap();
+    assert_eq!(b.frame_count(), 23);
+    assert_eq!(b.joints.len(), 18);
+    let m: MotionJson = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    assert_eq!(m.format, "monocap.motion/1");
+    assert_eq!((m.frame_count, m.frames.len()), (23, 23));
+    assert_eq!(m.parameters.len(), 30);
+    assert_eq!(m.joints.len(), 18);
+    // The person-free lead-in is reported as such, not fitted to noise.
+    for f in &m.frames[..3] {
+        assert!(
+            !f.person && f.cost.is_none() && f.iou.is_none(),
+            "frame {}",
+            f.index
+        );
+    }
+    for f in &m.frames[3..] {
+        assert!(
+            f.person && f.iou.unwrap() > 0.6,
+            "frame {}: {:?}",
+            f.index,
+            f.iou
+        );
+        assert_eq!(
+            (f.joints3d.len(), f.joints2d.len(), f.params.len()),
+            (18, 18, 30)
+        );
+        // In front of the camera: z from the camera into the scene is positive.
+        assert!(f.joints3d.iter().all(|j| j[2] > 100.0));
+    }
+    // The same as JSON through -o.
+    let json2 = dir.path("o.json");
+    let out = monocap(&["track", s(&clip), "-o", s(&json2), "--restarts", "1"]);
+    assert!(out.status.success());
+    let m2: MotionJson = serde_json::from_slice(&std::fs::read(&json2).unwrap()).unwrap();
+    assert_eq!(m2.frames.len(), 23);
+    let zip = std::fs::read(&mm).unwrap();
+    assert!(zip.len() > 100);
+}
+
+/// A clip of `n` copies of one frame (no person).
+fn still_clip(dir: &TempDir, name: &str, n: usize) -> std::path::PathBuf {
+    let p = dir.path(name);
+    let mut w = write::create(&p, 64, 48, 30.0).unwrap();
+    let img = image::RgbImage::from_fn(64, 48, |x, y| {
+        image::Rgb([(x * 3) as u8, (y * 5) as u8, 90])
+    });
+    for _ in 0..n {
+        w.push(Frame::Rgb(&img)).unwrap();
+    }
+    w.finish().unwrap();
+    p
+}
+
+#[test]
+fn bad_input_gives_one_clear_line() {
+    let dir = TempDir::new("track-bad");
+    let out = dir.path("o.bvh");
+    // No person in any frame.
+    let still = still_clip(&dir, "still.y4m", 12);
+    assert_fails_with(
+        "no person",
+        &monocap(&["track", s(&still), "-o", s(&out)]),
+        "no person",
+    );
+    // A 1-frame clip with no person.
+    let one = still_clip(&dir, "one.y4m", 1);
+    assert_fails_with(
+        "1 frame",
+        &monocap(&["track", s(&one), "-o", s(&out)]),
+        "no person",
+    );
+    // An empty archive.
+    let empty = dir.path("empty.zip");
+    {
+        let f = std::fs::File::create(&empty).unwrap();
+        zip::ZipWriter::new(f).finish().unwrap();
+    }
+    let r = monocap(&["track", s(&empty), "-o", s(&out)]);
+    assert!(!r.status.success());
+    assert!(!String::from_utf8_lossy(&r.stderr).contains("panicked"));
+    // Unknown output format, checked before any work.
+    assert_fails_with(
+        "format",
+        &monocap(&["track", s(&still), "-o", s(&dir.path("o.fbx"))]),
+        "unknown motion format",
+    );
+
+    // Keyframes: outside the clip, unknown parameter, broken JSON.
+    let clip = dir.path("run.zip");
+    let r = monocap(&[
+        "synth",
+        "--bvh",
+        FIXTURE,
+        "--out",
+        s(&clip),
+        "--style",
+        "silhouette",
+    ]);
+    assert!(r.status.success());
+    let kf = dir.write(
+        "kf.json",
+        br#"{"keyframes": [{"frame": 500, "range": 3, "params": {"l_elbow": 40}}]}"#,
+    );
+    assert_fails_with(
+        "keyframe outside",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--keyframes", s(&kf)]),
+        "outside the clip",
+    );
+    let kf = dir.write(
+        "kf2.json",
+        br#"{"keyframes": [{"frame": 5, "range": 3, "params": {"l_elbo": 40}}]}"#,
+    );
+    assert_fails_with(
+        "unknown parameter",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--keyframes", s(&kf)]),
+        "l_elbo",
+    );
+    let kf = dir.write("kf3.json", b"{\"keyframes\": [");
+    assert_fails_with(
+        "broken keyframes",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--keyframes", s(&kf)]),
+        "kf3.json",
+    );
+    // An initial frame outside the clip.
+    assert_fails_with(
+        "init frame",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--init-frame", "99"]),
+        "initial frame 99",
+    );
+    // Nonsense options.
+    assert_fails_with(
+        "restarts",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--restarts", "0"]),
+        "--restarts",
+    );
+    assert_fails_with(
+        "fov",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--fov-deg", "0"]),
+        "field of view",
+    );
+    assert!(!out.exists(), "nothing written on failure");
+}
+
+#[test]
+fn keyframes_set_the_pose_on_their_frame() {
+    let dir = TempDir::new("track-kf");
+    let clip = dir.path("run.zip");
+    let r = monocap(&[
+        "synth",
+        "--bvh",
+        FIXTURE,
+        "--out",
+        s(&clip),
+        "--style",
+        "silhouette",
+    ]);
+    assert!(r.status.success());
+    let kf = dir.write(
+        "kf.json",
+        br#"{"keyframes": [{"frame": 8, "range": 2, "params": {"l_elbow": 77.0, "r_knee": 33.0}}]}"#,
+    );
+    let json = dir.path("m.json");
+    let r = monocap(&[
+        "track",
+        s(&clip),
+        "-o",
+        s(&json),
+        "--keyframes",
+        s(&kf),
+        "--restarts",
+        "1",
+    ]);
+    assert!(r.status.success(), "{}", String::from_utf8_lossy(&r.stderr));
+    let m: MotionJson = serde_json::from_slice(&std::fs::read(&json).unwrap()).unwrap();
+    let f = &m.frames[8];
+    assert!(f.keyframe);
+    let elbow = m.parameters.iter().position(|p| p == "l_elbow").unwrap();
+    let knee = m.parameters.iter().position(|p| p == "r_knee").unwrap();
+    assert_eq!((f.params[elbow], f.params[knee]), (77.0, 33.0));
+    assert!(m.frames[7].keyframe && m.frames[10].keyframe && !m.frames[11].keyframe);
+}
