@@ -41,6 +41,10 @@ pub struct Part {
 /// Number of parts of the body.
 pub const PART_COUNT: usize = 26;
 
+/// The first parts are the trunk's (pelvis, abdomen, chest, shoulders, neck, head);
+/// the arms' and then the legs' follow.
+pub const TRUNK_PARTS: usize = 6;
+
 /// The parts of a body of shape α.
 pub fn body_parts(shape: &ShapeValues) -> [Part; PART_COUNT] {
     use Kind::{Cylinder as C, Ellipsoid as E};
@@ -127,6 +131,18 @@ mod tests {
     use super::*;
     use crate::body::params::STANDARD_SHAPE;
     use crate::body::skeleton::standard_rest;
+
+    #[test]
+    fn the_trunk_parts_come_first() {
+        let parts = body_parts(&STANDARD_SHAPE);
+        for (i, p) in parts.iter().enumerate() {
+            let trunk = matches!(
+                p.joint,
+                Joint::Hips | Joint::Spine | Joint::Neck | Joint::Head
+            );
+            assert_eq!(trunk, i < TRUNK_PARTS, "part {i} ({})", p.name);
+        }
+    }
 
     #[test]
     fn standard_body_feet_touch_the_ground_and_head_top_is_the_tip() {

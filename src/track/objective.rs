@@ -52,8 +52,11 @@ impl Default for Weights {
 pub struct Target {
     pub width: u32,
     pub height: u32,
-    /// G: what covering each pixel adds to the cost (row-major).
+    /// G: what covering each pixel adds to the cost (row-major): the XOR and edge
+    /// terms, for any part of the model …
     gain: Vec<f32>,
+    /// … and the region term, for the parts of the arms and legs only.
+    limb_gain: Vec<f32>,
     /// Σ_S d: the cost of a model that covers nothing.
     base: f64,
     /// Candidates for the model's hands, feet and head top (pixels).
@@ -71,6 +74,7 @@ impl Target {
         let (width, height) = (f.width, f.height);
         let s = &f.person;
         let mut gain = vec![0f32; f.coremap.len()];
+        let mut limb_gain = vec![0f32; f.coremap.len()];
         let mut base = 0.0;
         for y in 0..height {
             for x in 0..width {
@@ -87,7 +91,7 @@ impl Target {
                     g -= w.edge as f32;
                 }
                 if f.regions.get(x, y) {
-                    g -= w.region as f32;
+                    limb_gain[i] = -w.region as f32;
                 }
                 gain[i] = g;
             }
@@ -107,6 +111,7 @@ impl Target {
             width,
             height,
             gain,
+            limb_gain,
             base,
             hands: pick(&[ExtremityKind::Hand, ExtremityKind::Unknown]),
             feet: pick(&[ExtremityKind::Foot, ExtremityKind::Unknown]),
@@ -148,12 +153,9 @@ pub struct Evaluator<'a> {
     weights: Weights,
     /// World y of the ground (None: no ground constraint).
     ground: Option<f64>,
-    /// Parts re-rendered per evaluation (all of them unless focused).
-    moving: Vec<usize>,
-    /// The parts that stay put while focused, and Σ G over them.
-    fixed: Mask,
-    fixed_sum: f64,
-    scratch: Mask,
+    /// The whole model (G) and its arms and legs (the region term).
+    all: Layer,
+    limbs: Layer,
     posed: Posed,
     /// Evaluations so far.
     pub evals: u64,
@@ -178,10 +180,8 @@ impl<'a> Evaluator<'a> {
             target,
             weights,
             ground,
-            moving: (0..PART_COUNT).collect(),
-            fixed: Mask::new(cam.width, cam.height),
-            fixed_sum: 0.0,
-            scratch: Mask::new(cam.width, cam.height),
+            all: Layer::new(cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect()),
+            limbs: Layer::new(cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect()),
             posed: Posed::default(),
             evals: 0,
         }
@@ -191,34 +191,36 @@ impl<'a> Evaluator<'a> {
     /// in `pose`): the parts they do not move are rendered once here.
     pub fn focus(&mut self, pose: &Pose, params: &[usize]) {
         let moves = joints_moved_by(params);
-        self.moving.clear();
-        let mut fixed_parts = Vec::with_capacity(PART_COUNT);
-        for (i, p) in self.body.parts.iter().enumerate() {
-            if moves[p.joint.index()] {
-                self.moving.push(i);
-            } else {
-                fixed_parts.push(i);
-            }
-        }
+        let moving = |i: usize| moves[self.body.parts[i].joint.index()];
+        let fixed_all: Vec<usize> = (0..PART_COUNT).filter(|&i| !moving(i)).collect();
+        let fixed_limbs: Vec<usize> = fixed_all.iter().copied().filter(|&i| is_limb(i)).collect();
+        self.all.moving = (0..PART_COUNT)
+            .filter(|&i| moving(i) && !is_limb(i))
+            .collect();
+        self.limbs.moving = (0..PART_COUNT)
+            .filter(|&i| moving(i) && is_limb(i))
+            .collect();
         self.body.skeleton.pose(pose, &mut self.posed);
-        self.fixed.clear();
-        self.fixed_sum = 0.0;
-        if let Some((y0, y1)) = render_parts(
+        self.all.fix(
             self.body,
             &self.posed,
             self.cam,
-            &fixed_parts,
-            &mut self.fixed,
-        ) {
-            self.fixed_sum = sum_over(&self.target.gain, &self.fixed, None, y0, y1);
-        }
+            &fixed_all,
+            &self.target.gain,
+        );
+        self.limbs.fix(
+            self.body,
+            &self.posed,
+            self.cam,
+            &fixed_limbs,
+            &self.target.limb_gain,
+        );
     }
 
     /// Every part moves again.
     pub fn unfocus(&mut self) {
-        self.moving = (0..PART_COUNT).collect();
-        self.fixed.clear();
-        self.fixed_sum = 0.0;
+        self.all = Layer::new(self.cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect());
+        self.limbs = Layer::new(self.cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect());
     }
 
     /// F(β) (+∞ when a constraint is violated).
@@ -231,16 +233,54 @@ impl<'a> Evaluator<'a> {
         if self.below_ground() {
             return f64::INFINITY;
         }
-        self.scratch.clear();
-        let mut total = self.target.base + self.fixed_sum;
-        if let Some((y0, y1)) = render_parts(
+        let mut total = self.target.base + self.all.fixed_sum + self.limbs.fixed_sum;
+        // The moving limbs first, on their own layer; then the rest of the moving
+        // parts, and the limbs' pixels, on the whole model's layer.
+        self.limbs.scratch.clear();
+        let limb_rows = render_parts(
             self.body,
             &self.posed,
             self.cam,
-            &self.moving,
-            &mut self.scratch,
-        ) {
-            total += sum_over(&self.target.gain, &self.scratch, Some(&self.fixed), y0, y1);
+            &self.limbs.moving,
+            &mut self.limbs.scratch,
+        );
+        if let Some((y0, y1)) = limb_rows {
+            total += sum_over(
+                &self.target.limb_gain,
+                &self.limbs.scratch,
+                Some(&self.limbs.fixed),
+                y0,
+                y1,
+            );
+        }
+        self.all.scratch.clear();
+        let rows = render_parts(
+            self.body,
+            &self.posed,
+            self.cam,
+            &self.all.moving,
+            &mut self.all.scratch,
+        );
+        let rows = match (rows, limb_rows) {
+            (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
+            (r, None) | (None, r) => r,
+        };
+        if let Some((y0, y1)) = rows {
+            if let Some((l0, l1)) = limb_rows {
+                for y in l0..=l1 {
+                    let src = self.limbs.scratch.row(y);
+                    for (d, s) in self.all.scratch.row_mut(y).iter_mut().zip(src) {
+                        *d |= s;
+                    }
+                }
+            }
+            total += sum_over(
+                &self.target.gain,
+                &self.all.scratch,
+                Some(&self.all.fixed),
+                y0,
+                y1,
+            );
         }
         total + self.weights.extremity * self.end_distances()
     }
@@ -257,6 +297,9 @@ impl<'a> Evaluator<'a> {
     pub fn terms(&mut self, pose: &Pose, features: &FrameFeatures) -> Terms {
         let mut m = Mask::new(self.cam.width, self.cam.height);
         self.render(pose, &mut m);
+        let mut limbs = Mask::new(self.cam.width, self.cam.height);
+        let limb_parts: Vec<usize> = (0..PART_COUNT).filter(|&i| is_limb(i)).collect();
+        render_parts(self.body, &self.posed, self.cam, &limb_parts, &mut limbs);
         let mut t = Terms::default();
         let s = &self.target.silhouette;
         for y in 0..self.cam.height {
@@ -268,7 +311,7 @@ impl<'a> Evaluator<'a> {
                 if a && b && features.edges.get(x, y) {
                     t.edge -= self.weights.edge;
                 }
-                if a && features.regions.get(x, y) {
+                if limbs.get(x, y) && features.regions.get(x, y) {
                     t.region -= self.weights.region;
                 }
             }
@@ -331,6 +374,41 @@ impl<'a> Evaluator<'a> {
         }
         sum
     }
+}
+
+/// A set of parts whose silhouette is summed against one gain map: those that move
+/// (rendered per evaluation) and those that stay put while a search is focused
+/// (rendered once, their sum kept).
+struct Layer {
+    moving: Vec<usize>,
+    fixed: Mask,
+    fixed_sum: f64,
+    scratch: Mask,
+}
+
+impl Layer {
+    fn new(cam: &Camera, moving: Vec<usize>) -> Layer {
+        Layer {
+            moving,
+            fixed: Mask::new(cam.width, cam.height),
+            fixed_sum: 0.0,
+            scratch: Mask::new(cam.width, cam.height),
+        }
+    }
+
+    fn fix(&mut self, body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], gain: &[f32]) {
+        self.fixed.clear();
+        self.fixed_sum = 0.0;
+        if let Some((y0, y1)) = render_parts(body, posed, cam, parts, &mut self.fixed) {
+            self.fixed_sum = sum_over(gain, &self.fixed, None, y0, y1);
+        }
+    }
+}
+
+/// Whether part `i` belongs to an arm or a leg (the parts the region term rewards,
+/// Eq. 6: the arm and leg regions are where the model's limbs should be).
+fn is_limb(i: usize) -> bool {
+    i >= crate::body::parts::TRUNK_PARTS
 }
 
 fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {

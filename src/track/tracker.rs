@@ -36,6 +36,9 @@ use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
 use crate::vision::features::{compute, FeatureOptions, FrameFeatures};
 
+/// Frames tracked from each initial candidate to choose between them.
+const HYPOTHESIS_FRAMES: usize = 15;
+
 /// Latest user-chosen initial frame (frames before it are buffered).
 pub const MAX_INIT_FRAME: usize = 1800;
 
@@ -290,11 +293,50 @@ impl Tracker {
 
         // Phase 2: initialise.
         let t0 = Instant::now();
-        let (shape, init_pose) = match self.opts.initial {
-            Some(given) => given,
+        let (shape, candidates) = match self.opts.initial {
+            Some((shape, pose)) => (shape, vec![pose]),
             None => self.initialise(&pending[init].target),
         };
         let body = Body::new(&shape);
+        // Several candidates: keep the one that explains the next frames best.
+        let init_pose = if candidates.len() == 1 {
+            candidates[0]
+        } else {
+            let ahead: Vec<&Target> = pending
+                .iter()
+                .skip(init + 1)
+                .take(HYPOTHESIS_FRAMES)
+                .map(|p| &p.target)
+                .chain(
+                    pending[..init]
+                        .iter()
+                        .rev()
+                        .take(HYPOTHESIS_FRAMES)
+                        .map(|p| &p.target),
+                )
+                .take(HYPOTHESIS_FRAMES)
+                .collect();
+            let mut best: Option<(f64, Pose)> = None;
+            for c in &candidates {
+                let mut probe = Search {
+                    tracker: self,
+                    body: &body,
+                    ground: sole_height(&body, &body.posed(c)),
+                    evals: 0,
+                };
+                let mut history = History::new(*c);
+                let total: f64 = ahead
+                    .iter()
+                    .enumerate()
+                    .filter_map(|(i, t)| probe.step(init + 1 + i, t, &mut history).cost)
+                    .sum();
+                timing.evals += probe.evals;
+                if best.as_ref().is_none_or(|(b, _)| total < *b) {
+                    best = Some((total, *c));
+                }
+            }
+            best.expect("candidates").1
+        };
         let ground = sole_height(&body, &body.posed(&init_pose));
         let mut search = Search {
             tracker: self,
@@ -387,7 +429,11 @@ impl Tracker {
     /// body from the silhouette's bounding box, fit the pose from several headings
     /// (the silhouette does not say which way the person faces) and keep the best,
     /// then fit the 12 shape values with the root translation, and the pose again.
-    pub fn initialise(&self, target: &Target) -> (ShapeValues, Pose) {
+    ///
+    /// Returns the shape and the candidate poses, best first: the best fit and the
+    /// best one facing more than 90° away from it (a silhouette seen from the front
+    /// and from the back is nearly the same; the frames that follow tell them apart).
+    pub fn initialise(&self, target: &Target) -> (ShapeValues, Vec<Pose>) {
         let cam = &self.camera;
         let bbox = mask_bbox(&target.silhouette).expect("a person");
         let (_, rest) = standard_rest();
@@ -423,15 +469,27 @@ impl Tracker {
             })
             .collect();
         fits.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let (_, mut pose) = fits
+        let mut refined: Vec<(f64, Pose)> = fits
             .iter()
-            .take(3)
+            .take(4)
             .map(|(_, p)| {
                 let (pose, cost) = wide.fit_wide(target, *p, 3);
                 (cost, pose)
             })
+            .collect();
+        refined.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut pose = refined[0].1;
+        let heading = |p: &Pose| p[ix::ROOT_RY];
+        let turned = |a: f64, b: f64| {
+            let d = (a - b).rem_euclid(360.0);
+            d.min(360.0 - d) > 90.0
+        };
+        let other = fits
+            .iter()
+            .chain(refined.iter())
+            .filter(|(_, p)| turned(heading(p), heading(&pose)))
             .min_by(|a, b| a.0.total_cmp(&b.0))
-            .expect("twelve headings");
+            .map(|(_, p)| *p);
 
         // Shape with the root translation, alternating with the pose.
         let mut shape = STANDARD_SHAPE;
@@ -473,7 +531,20 @@ impl Tracker {
             };
             pose = s.fit_wide(target, pose, 2).0;
         }
-        (shape, pose)
+        let mut poses = vec![pose];
+        if let Some(o) = other {
+            let body = Body::new(&shape);
+            let s = Search {
+                tracker: self,
+                body: &body,
+                ground: f64::NEG_INFINITY,
+                evals: 0,
+            };
+            let mut o = o;
+            o[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&pose[ix::ROOT_TX..=ix::ROOT_TZ]);
+            poses.push(s.fit_wide(target, o, 3).0);
+        }
+        (shape, poses)
     }
 }
 
