@@ -1,0 +1,613 @@
+//! Tracks the DAVIS person sequences (lucia, dance-twirl, tennis) from their
+//! hand-drawn masks and measures how well the body model's silhouette fits them.
+//!
+//! Each sequence's mask PNGs are packed into a ZIP (as a user would upload them)
+//! and tracked with [`monocap::track::run::track_clip`] with `masks = true`. The
+//! model's silhouette is then rendered at the clip's full resolution (854×480) and
+//! compared with the input mask (IoU). Prints a table per sequence and writes a
+//! picture: one row per sequence, four frames spread through the clip, the video
+//! frame with the input mask and the model's silhouette tinted over it.
+//!
+//! ```text
+//! cargo run --release --example davis_track [picture.png]
+//! ```
+//!
+//! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
+//! crate; when absent the example says so and exits successfully.
+
+use std::fs::File;
+use std::io::{BufWriter, Write};
+use std::ops::ControlFlow;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use image::imageops::{resize, FilterType};
+use image::{GrayImage, Rgb, RgbImage};
+use monocap::body::raster::render_mask;
+use monocap::body::{Body, Mask};
+use monocap::track::run::{track_clip, ClipTrack, ClipTrackOptions};
+
+const SEQUENCES: [&str; 3] = ["lucia", "dance-twirl", "tennis"];
+/// The project's stated target for the mean IoU of a sequence.
+const TARGET_IOU: f64 = 0.85;
+/// A frame counts as badly fitted below this IoU.
+const BAD_IOU: f64 = 0.5;
+/// Frames per row of the picture.
+const COLUMNS: usize = 4;
+/// Width of one cell of the picture (pixels).
+const CELL_W: u32 = 320;
+
+/// What one sequence gave.
+struct SeqResult {
+    name: String,
+    frames: usize,
+    person_frames: usize,
+    /// IoU per frame at full resolution.
+    iou: Vec<f64>,
+    /// Per frame: share of the model's pixels inside the mask, share of the mask's
+    /// pixels the model covers.
+    precision: Vec<f64>,
+    recall: Vec<f64>,
+    /// Seconds of the tracker's features and search.
+    timing: (f64, f64),
+    /// IoU per frame at the tracker's working resolution (as it reports).
+    work_iou: Vec<Option<f64>>,
+    track_seconds: f64,
+    init_frame: usize,
+    work_size: (u32, u32),
+    /// The input masks and the model's silhouettes of the frames in the picture.
+    cells: Vec<Cell>,
+}
+
+struct Cell {
+    frame: usize,
+    iou: f64,
+    image: RgbImage,
+}
+
+fn main() -> Result<()> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let shared = root.join("../shared");
+    let data = shared.join("data/davis");
+    if !shared.is_dir() || !data.is_dir() {
+        println!(
+            "davis_track: {} not found (the DAVIS sequences are not available here); nothing to do",
+            data.display()
+        );
+        return Ok(());
+    }
+    let picture = std::env::args_os()
+        .nth(1)
+        .map(PathBuf::from)
+        .unwrap_or_else(|| root.join("docs/davis_tracking.png"));
+    for readme in ["README", "README.md", "README.txt"] {
+        if let Ok(text) = std::fs::read_to_string(data.join(readme)) {
+            println!("{}:\n{}\n", readme, text.trim());
+        }
+    }
+
+    let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
+    let started = Instant::now();
+    let mut results = Vec::new();
+    let mut outcome = Ok(());
+    for seq in SEQUENCES {
+        let dir = data.join(seq);
+        if !dir.is_dir() {
+            println!("{seq}: {} not found, skipped", dir.display());
+            continue;
+        }
+        match run_sequence(seq, &dir, &tmp) {
+            Ok(r) => results.push(r),
+            Err(e) => {
+                outcome = Err(e.context(format!("sequence {seq}")));
+                break;
+            }
+        }
+    }
+    let _ = std::fs::remove_dir_all(&tmp);
+    outcome?;
+    if results.is_empty() {
+        println!("davis_track: no sequence found under {}", data.display());
+        return Ok(());
+    }
+
+    print_table(&results);
+    println!(
+        "\nwall time (packing, tracking, full-resolution scoring, picture cells): {:.1} s",
+        started.elapsed().as_secs_f64()
+    );
+
+    write_picture(&results, &picture)?;
+    println!("picture: {}", picture.display());
+    Ok(())
+}
+
+/// Sorted `*.<ext>` files of `dir`.
+fn list(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            p.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+        })
+        .collect();
+    files.sort();
+    Ok(files)
+}
+
+/// Packs the mask PNGs into `zip_path` as 000000.png, 000001.png, … (stored: the
+/// PNGs are compressed already).
+fn pack_zip(masks: &[PathBuf], zip_path: &Path) -> Result<()> {
+    let file =
+        File::create(zip_path).with_context(|| format!("cannot create {}", zip_path.display()))?;
+    let mut zip = zip::ZipWriter::new(BufWriter::new(file));
+    let options =
+        zip::write::SimpleFileOptions::default().compression_method(zip::CompressionMethod::Stored);
+    for (i, path) in masks.iter().enumerate() {
+        let bytes =
+            std::fs::read(path).with_context(|| format!("cannot read {}", path.display()))?;
+        zip.start_file(format!("{i:06}.png"), options)?;
+        zip.write_all(&bytes)?;
+    }
+    let mut out = zip.finish()?;
+    out.flush()?;
+    Ok(())
+}
+
+fn read_mask(path: &Path) -> Result<(Mask, [u64; 3])> {
+    let gray: GrayImage = image::open(path)
+        .with_context(|| format!("cannot read {}", path.display()))?
+        .to_luma8();
+    // Values seen: 0, 255, anything else.
+    let mut hist = [0u64; 3];
+    for p in gray.pixels() {
+        hist[match p.0[0] {
+            0 => 0,
+            255 => 1,
+            _ => 2,
+        }] += 1;
+    }
+    Ok((Mask::from_gray(&gray, 128), hist))
+}
+
+fn run_sequence(seq: &str, dir: &Path, tmp: &Path) -> Result<SeqResult> {
+    let masks = list(&dir.join("masks"), "png")?;
+    let frames = list(&dir.join("frames"), "jpg")?;
+    if masks.is_empty() {
+        bail!("no mask PNGs in {}", dir.join("masks").display());
+    }
+    if frames.len() != masks.len() {
+        println!(
+            "{seq}: {} masks but {} frames (the picture uses frames by index)",
+            masks.len(),
+            frames.len()
+        );
+    }
+    let zip_path = tmp.join(format!("{seq}.zip"));
+    pack_zip(&masks, &zip_path)?;
+
+    let opts = ClipTrackOptions {
+        masks: true,
+        ..ClipTrackOptions::default()
+    };
+    let t0 = Instant::now();
+    let mut done = 0usize;
+    let clip: ClipTrack = track_clip(&zip_path, &opts, |_, _| {
+        done += 1;
+        ControlFlow::Continue(())
+    })?;
+    let track_seconds = t0.elapsed().as_secs_f64();
+    let track = &clip.track;
+    if track.frames.len() != masks.len() {
+        bail!(
+            "{} frames tracked for {} masks",
+            track.frames.len(),
+            masks.len()
+        );
+    }
+    if (clip.camera.width, clip.camera.height) != (clip.info.width, clip.info.height) {
+        bail!("the returned camera is not at the clip's resolution");
+    }
+
+    let body = Body::new(&track.shape);
+    let cam = &clip.camera;
+    let mut model = Mask::new(cam.width, cam.height);
+    let mut iou = Vec::with_capacity(masks.len());
+    let (mut precision, mut recall) = (Vec::new(), Vec::new());
+    let mut hist = [0u64; 3];
+    let picks = picked_frames(masks.len());
+    let mut cells = Vec::new();
+    for (i, path) in masks.iter().enumerate() {
+        let (input, h) = read_mask(path)?;
+        for c in 0..3 {
+            hist[c] += h[c];
+        }
+        if (input.width(), input.height()) != (cam.width, cam.height) {
+            bail!("{}: not {}×{}", path.display(), cam.width, cam.height);
+        }
+        let frame = &track.frames[i];
+        render_mask(&body, &body.posed(&frame.pose), cam, &mut model);
+        let v = input.iou(&model);
+        iou.push(v);
+        let inter = input.and_count(&model) as f64;
+        precision.push(inter / model.count().max(1) as f64);
+        recall.push(inter / input.count().max(1) as f64);
+        if picks.contains(&i) {
+            let video = match frames.get(i) {
+                Some(p) => image::open(p)
+                    .with_context(|| format!("cannot read {}", p.display()))?
+                    .to_rgb8(),
+                None => RgbImage::from_pixel(cam.width, cam.height, Rgb([40, 40, 40])),
+            };
+            cells.push(Cell {
+                frame: i,
+                iou: v,
+                image: overlay_cell(&video, &input, &model),
+            });
+        }
+    }
+    if hist[2] > 0 {
+        println!(
+            "{seq}: the masks hold {} pixels that are neither 0 nor 255 (thresholded at 128)",
+            hist[2]
+        );
+    }
+    Ok(SeqResult {
+        name: seq.to_string(),
+        frames: masks.len(),
+        person_frames: track.frames.iter().filter(|f| f.person).count(),
+        iou,
+        precision,
+        recall,
+        timing: (track.timing.features, track.timing.search),
+        work_iou: track.frames.iter().map(|f| f.iou).collect(),
+        track_seconds,
+        init_frame: track.init_frame,
+        work_size: (track.camera.width, track.camera.height),
+        cells,
+    })
+}
+
+/// `COLUMNS` frames evenly spread through a clip of `n` frames (first and last
+/// included).
+fn picked_frames(n: usize) -> Vec<usize> {
+    if n <= COLUMNS {
+        return (0..n).collect();
+    }
+    (0..COLUMNS)
+        .map(|c| (c * (n - 1) + (COLUMNS - 1) / 2) / (COLUMNS - 1))
+        .collect()
+}
+
+fn mean(v: impl IntoIterator<Item = f64>) -> f64 {
+    let (mut s, mut n) = (0.0, 0usize);
+    for x in v {
+        s += x;
+        n += 1;
+    }
+    if n == 0 {
+        f64::NAN
+    } else {
+        s / n as f64
+    }
+}
+
+fn print_table(results: &[SeqResult]) {
+    println!();
+    println!(
+        "{:<12} {:>6} {:>7} {:>9} {:>8} {:>7} {:>9} {:>9} {:>5}  mean IoU ≥ {TARGET_IOU}",
+        "sequence", "frames", "person", "mean IoU", "min IoU", "IoU<0.5", "work IoU", "track f/s", "init",
+    );
+    for r in results {
+        let m = mean(r.iou.iter().copied());
+        let min = r.iou.iter().copied().fold(f64::INFINITY, f64::min);
+        let bad = r.iou.iter().filter(|&&v| v < BAD_IOU).count();
+        let work = mean(r.work_iou.iter().flatten().copied());
+        println!(
+            "{:<12} {:>6} {:>7} {:>9.3} {:>8.3} {:>7} {:>9.3} {:>9.2} {:>5}  {}",
+            r.name,
+            r.frames,
+            r.person_frames,
+            m,
+            min,
+            bad,
+            work,
+            r.frames as f64 / r.track_seconds,
+            r.init_frame,
+            if m >= TARGET_IOU { "yes" } else { "NO" }
+        );
+    }
+    let mean_iou = mean(results.iter().map(|r| mean(r.iou.iter().copied())));
+    let frames: usize = results.iter().map(|r| r.frames).sum();
+    let seconds: f64 = results.iter().map(|r| r.track_seconds).sum();
+    println!(
+        "{:<12} {:>6} {:>7} {:>9.3} {:>8} {:>7} {:>9.3} {:>9.2} {:>5}  {}",
+        "mean",
+        frames,
+        "",
+        mean_iou,
+        "",
+        "",
+        mean(
+            results
+                .iter()
+                .map(|r| mean(r.work_iou.iter().flatten().copied()))
+        ),
+        frames as f64 / seconds,
+        "",
+        if mean_iou >= TARGET_IOU { "yes" } else { "NO" }
+    );
+    let (w, h) = results[0].work_size;
+    println!(
+        "\nIoU at the clip's resolution (854×480); \"work IoU\" is the tracker's own, at {w}×{h}. \
+         track f/s: frames / wall time of track_clip (decoding the ZIP included). \
+         \"mean\" row: mean of the sequences' means."
+    );
+    println!(
+        "\n{:<12} {:>10} {:>8} {:>10} {:>9}",
+        "sequence", "precision", "recall", "features s", "search s"
+    );
+    for r in results {
+        println!(
+            "{:<12} {:>10.3} {:>8.3} {:>10.2} {:>9.2}",
+            r.name,
+            mean(r.precision.iter().copied()),
+            mean(r.recall.iter().copied()),
+            r.timing.0,
+            r.timing.1
+        );
+    }
+    println!(
+        "precision: share of the model's silhouette inside the mask; recall: share of the \
+         mask the model covers (means over frames, full resolution)."
+    );
+    println!("\nper-frame IoU (full resolution):");
+    for r in results {
+        let line: Vec<String> = r.iou.iter().map(|v| format!("{v:.2}")).collect();
+        println!("{}: {}", r.name, line.join(" "));
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The picture.
+
+const INPUT_ONLY: [f32; 3] = [40.0, 110.0, 255.0];
+const MODEL_ONLY: [f32; 3] = [255.0, 50.0, 40.0];
+const BOTH: [f32; 3] = [40.0, 230.0, 80.0];
+const OUTLINE: [u8; 3] = [255, 255, 255];
+const TINT: f32 = 0.55;
+
+/// The video frame downscaled to [`CELL_W`] wide, the masks tinted over it by their
+/// coverage of each cell pixel (blue: input only, red: model only, green: both), and
+/// the model's outline in white.
+fn overlay_cell(video: &RgbImage, input: &Mask, model: &Mask) -> RgbImage {
+    let (w, h) = (video.width(), video.height());
+    let cw = CELL_W;
+    let ch = ((h as u64 * cw as u64 + w as u64 / 2) / w as u64) as u32;
+    let small = resize(video, cw, ch, FilterType::Triangle);
+    // Coverage fractions: [input only, model only, both] per cell pixel.
+    let mut cover = vec![[0f32; 3]; (cw * ch) as usize];
+    let mut model_small = vec![false; (cw * ch) as usize];
+    for cy in 0..ch {
+        let y0 = cy * h / ch;
+        let y1 = ((cy + 1) * h / ch).max(y0 + 1).min(h);
+        for cx in 0..cw {
+            let x0 = cx * w / cw;
+            let x1 = ((cx + 1) * w / cw).max(x0 + 1).min(w);
+            let mut c = [0u32; 3];
+            let mut m = 0u32;
+            for y in y0..y1 {
+                for x in x0..x1 {
+                    let (a, b) = (input.get(x, y), model.get(x, y));
+                    match (a, b) {
+                        (true, false) => c[0] += 1,
+                        (false, true) => c[1] += 1,
+                        (true, true) => c[2] += 1,
+                        _ => {}
+                    }
+                    m += b as u32;
+                }
+            }
+            let n = ((y1 - y0) * (x1 - x0)) as f32;
+            let i = (cy * cw + cx) as usize;
+            cover[i] = c.map(|v| v as f32 / n);
+            model_small[i] = m as f32 >= n / 2.0;
+        }
+    }
+    let mut out = small.clone();
+    for (x, y, p) in out.enumerate_pixels_mut() {
+        let i = (y * cw + x) as usize;
+        let c = cover[i];
+        let mut px = p.0.map(|v| v as f32 * 0.8);
+        for (k, colour) in [INPUT_ONLY, MODEL_ONLY, BOTH].iter().enumerate() {
+            let a = TINT * c[k];
+            for ch in 0..3 {
+                px[ch] = px[ch] * (1.0 - a) + colour[ch] * a;
+            }
+        }
+        p.0 = px.map(|v| v.round().clamp(0.0, 255.0) as u8);
+    }
+    // The model's outline: set pixels with an unset 4-neighbour.
+    let at = |x: i64, y: i64| -> bool {
+        x >= 0
+            && y >= 0
+            && x < cw as i64
+            && y < ch as i64
+            && model_small[(y as u32 * cw + x as u32) as usize]
+    };
+    for y in 0..ch as i64 {
+        for x in 0..cw as i64 {
+            if at(x, y) && !(at(x - 1, y) && at(x + 1, y) && at(x, y - 1) && at(x, y + 1)) {
+                out.put_pixel(x as u32, y as u32, Rgb(OUTLINE));
+            }
+        }
+    }
+    out
+}
+
+fn write_picture(results: &[SeqResult], path: &Path) -> Result<()> {
+    let gap = 4u32;
+    let ch = results
+        .iter()
+        .flat_map(|r| r.cells.iter().map(|c| c.image.height()))
+        .max()
+        .unwrap_or(180);
+    let legend_h = 24u32;
+    let width = COLUMNS as u32 * CELL_W + (COLUMNS as u32 + 1) * gap;
+    let height = results.len() as u32 * (ch + gap) + gap + legend_h;
+    let mut img = RgbImage::from_pixel(width, height, Rgb([24, 24, 24]));
+    for (row, r) in results.iter().enumerate() {
+        let y0 = gap + row as u32 * (ch + gap);
+        for (col, cell) in r.cells.iter().enumerate() {
+            let x0 = gap + col as u32 * (CELL_W + gap);
+            image::imageops::replace(&mut img, &cell.image, x0 as i64, y0 as i64);
+            let label = format!("{} #{} IoU {:.2}", r.name, cell.frame, cell.iou);
+            let colour = if cell.iou >= TARGET_IOU {
+                [255, 255, 255]
+            } else if cell.iou >= BAD_IOU {
+                [255, 220, 120]
+            } else {
+                [255, 120, 120]
+            };
+            label_box(&mut img, x0 + 3, y0 + 3, &label, 2, colour);
+        }
+    }
+    // Legend.
+    let ly = height - legend_h + 5;
+    let mut x = gap + 4;
+    let entries: [([f32; 3], &str); 4] = [
+        (INPUT_ONLY, "input mask only"),
+        (MODEL_ONLY, "model only"),
+        (BOTH, "both"),
+        (OUTLINE.map(|v| v as f32), "model outline"),
+    ];
+    for (colour, text) in entries {
+        fill_rect(&mut img, x, ly, 14, 14, colour.map(|v| v as u8));
+        x += 20;
+        draw_text(&mut img, x, ly, text, 2, [220, 220, 220]);
+        x += text_width(text, 2) + 22;
+    }
+    if let Some(dir) = path.parent() {
+        if !dir.as_os_str().is_empty() {
+            std::fs::create_dir_all(dir)
+                .with_context(|| format!("cannot create {}", dir.display()))?;
+        }
+    }
+    img.save(path)
+        .with_context(|| format!("cannot write {}", path.display()))?;
+    let bytes = std::fs::metadata(path)?.len();
+    println!(
+        "picture {}×{}, {:.0} kB: rows {}, columns = frames spread through each clip",
+        width,
+        height,
+        bytes as f64 / 1024.0,
+        results
+            .iter()
+            .map(|r| r.name.as_str())
+            .collect::<Vec<_>>()
+            .join(", ")
+    );
+    Ok(())
+}
+
+fn fill_rect(img: &mut RgbImage, x0: u32, y0: u32, w: u32, h: u32, c: [u8; 3]) {
+    for y in y0..(y0 + h).min(img.height()) {
+        for x in x0..(x0 + w).min(img.width()) {
+            img.put_pixel(x, y, Rgb(c));
+        }
+    }
+}
+
+/// Text on a translucent dark box.
+fn label_box(img: &mut RgbImage, x: u32, y: u32, text: &str, scale: u32, c: [u8; 3]) {
+    let (w, h) = (text_width(text, scale) + 6, 7 * scale + 6);
+    for yy in y..(y + h).min(img.height()) {
+        for xx in x..(x + w).min(img.width()) {
+            let p = img.get_pixel_mut(xx, yy);
+            p.0 = p.0.map(|v| (v as u32 * 2 / 7) as u8);
+        }
+    }
+    draw_text(img, x + 3, y + 3, text, scale, c);
+}
+
+// A 5×7 bitmap font of the characters the labels use (rows top to bottom, bit 4
+// = leftmost column).
+fn glyph(ch: char) -> [u8; 7] {
+    match ch {
+        '0' => [0x0E, 0x11, 0x13, 0x15, 0x19, 0x11, 0x0E],
+        '1' => [0x04, 0x0C, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        '2' => [0x0E, 0x11, 0x01, 0x02, 0x04, 0x08, 0x1F],
+        '3' => [0x1F, 0x02, 0x04, 0x02, 0x01, 0x11, 0x0E],
+        '4' => [0x02, 0x06, 0x0A, 0x12, 0x1F, 0x02, 0x02],
+        '5' => [0x1F, 0x10, 0x1E, 0x01, 0x01, 0x11, 0x0E],
+        '6' => [0x06, 0x08, 0x10, 0x1E, 0x11, 0x11, 0x0E],
+        '7' => [0x1F, 0x01, 0x02, 0x04, 0x08, 0x08, 0x08],
+        '8' => [0x0E, 0x11, 0x11, 0x0E, 0x11, 0x11, 0x0E],
+        '9' => [0x0E, 0x11, 0x11, 0x0F, 0x01, 0x02, 0x0C],
+        'a' => [0x00, 0x00, 0x0E, 0x01, 0x0F, 0x11, 0x0F],
+        'b' => [0x10, 0x10, 0x16, 0x19, 0x11, 0x11, 0x1E],
+        'c' => [0x00, 0x00, 0x0E, 0x10, 0x10, 0x11, 0x0E],
+        'd' => [0x01, 0x01, 0x0D, 0x13, 0x11, 0x11, 0x0F],
+        'e' => [0x00, 0x00, 0x0E, 0x11, 0x1F, 0x10, 0x0E],
+        'f' => [0x06, 0x09, 0x08, 0x1C, 0x08, 0x08, 0x08],
+        'g' => [0x00, 0x0F, 0x11, 0x11, 0x0F, 0x01, 0x0E],
+        'h' => [0x10, 0x10, 0x16, 0x19, 0x11, 0x11, 0x11],
+        'i' => [0x04, 0x00, 0x0C, 0x04, 0x04, 0x04, 0x0E],
+        'j' => [0x02, 0x00, 0x06, 0x02, 0x02, 0x12, 0x0C],
+        'k' => [0x10, 0x10, 0x12, 0x14, 0x18, 0x14, 0x12],
+        'l' => [0x0C, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        'm' => [0x00, 0x00, 0x1A, 0x15, 0x15, 0x11, 0x11],
+        'n' => [0x00, 0x00, 0x16, 0x19, 0x11, 0x11, 0x11],
+        'o' => [0x00, 0x00, 0x0E, 0x11, 0x11, 0x11, 0x0E],
+        'p' => [0x00, 0x00, 0x1E, 0x11, 0x1E, 0x10, 0x10],
+        'q' => [0x00, 0x00, 0x0D, 0x13, 0x0F, 0x01, 0x01],
+        'r' => [0x00, 0x00, 0x16, 0x19, 0x10, 0x10, 0x10],
+        's' => [0x00, 0x00, 0x0E, 0x10, 0x0E, 0x01, 0x1E],
+        't' => [0x08, 0x08, 0x1C, 0x08, 0x08, 0x09, 0x06],
+        'u' => [0x00, 0x00, 0x11, 0x11, 0x11, 0x13, 0x0D],
+        'v' => [0x00, 0x00, 0x11, 0x11, 0x11, 0x0A, 0x04],
+        'w' => [0x00, 0x00, 0x11, 0x11, 0x15, 0x15, 0x0A],
+        'x' => [0x00, 0x00, 0x11, 0x0A, 0x04, 0x0A, 0x11],
+        'y' => [0x00, 0x00, 0x11, 0x11, 0x0F, 0x01, 0x0E],
+        'z' => [0x00, 0x00, 0x1F, 0x02, 0x04, 0x08, 0x1F],
+        'I' => [0x0E, 0x04, 0x04, 0x04, 0x04, 0x04, 0x0E],
+        'U' => [0x11, 0x11, 0x11, 0x11, 0x11, 0x11, 0x0E],
+        '.' => [0x00, 0x00, 0x00, 0x00, 0x00, 0x0C, 0x0C],
+        '-' => [0x00, 0x00, 0x00, 0x1F, 0x00, 0x00, 0x00],
+        ':' => [0x00, 0x0C, 0x0C, 0x00, 0x0C, 0x0C, 0x00],
+        '#' => [0x0A, 0x0A, 0x1F, 0x0A, 0x1F, 0x0A, 0x0A],
+        '=' => [0x00, 0x00, 0x1F, 0x00, 0x1F, 0x00, 0x00],
+        '/' => [0x01, 0x01, 0x02, 0x04, 0x08, 0x10, 0x10],
+        c if c.is_ascii_uppercase() => glyph(c.to_ascii_lowercase()),
+        _ => [0; 7],
+    }
+}
+
+fn text_width(text: &str, scale: u32) -> u32 {
+    (text.chars().count() as u32 * 6).saturating_sub(1) * scale
+}
+
+fn draw_text(img: &mut RgbImage, x0: u32, y0: u32, text: &str, scale: u32, c: [u8; 3]) {
+    for (i, ch) in text.chars().enumerate() {
+        let g = glyph(ch);
+        let gx = x0 + i as u32 * 6 * scale;
+        for (row, bits) in g.iter().enumerate() {
+            for col in 0..5u32 {
+                if bits & (0x10 >> col) != 0 {
+                    fill_rect(
+                        img,
+                        gx + col * scale,
+                        y0 + row as u32 * scale,
+                        scale,
+                        scale,
+                        c,
+                    );
+                }
+            }
+        }
+    }
+}
