@@ -300,7 +300,15 @@ fn print_table(results: &[SeqResult]) {
     println!();
     println!(
         "{:<12} {:>6} {:>7} {:>9} {:>8} {:>7} {:>9} {:>9} {:>5}  mean IoU ≥ {TARGET_IOU}",
-        "sequence", "frames", "person", "mean IoU", "min IoU", "IoU<0.5", "work IoU", "track f/s", "init",
+        "sequence",
+        "frames",
+        "person",
+        "mean IoU",
+        "min IoU",
+        "IoU<0.5",
+        "work IoU",
+        "track f/s",
+        "init",
     );
     for r in results {
         let m = mean(r.iou.iter().copied());
