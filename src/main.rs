@@ -503,9 +503,6 @@ fn track_command(a: TrackArgs) -> Result<()> {
             anyhow::bail!("{flag} {v}: expected a number ≥ 0");
         }
     }
-    if a.work_height < 32 {
-        anyhow::bail!("--work-height {}: expected at least 32 rows", a.work_height);
-    }
     let mut opts = ClipTrackOptions {
         fov_deg: a.fov_deg,
         masks: a.masks,

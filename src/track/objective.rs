@@ -236,7 +236,7 @@ impl<'a> Evaluator<'a> {
         let mut total = self.target.base + self.all.fixed_sum + self.limbs.fixed_sum;
         // The moving limbs first, on their own layer; then the rest of the moving
         // parts, and the limbs' pixels, on the whole model's layer.
-        self.limbs.scratch.clear();
+        self.limbs.clear();
         let limb_rows = render_parts(
             self.body,
             &self.posed,
@@ -253,7 +253,8 @@ impl<'a> Evaluator<'a> {
                 y1,
             );
         }
-        self.all.scratch.clear();
+        self.limbs.drawn = limb_rows;
+        self.all.clear();
         let rows = render_parts(
             self.body,
             &self.posed,
@@ -265,6 +266,7 @@ impl<'a> Evaluator<'a> {
             (Some((a, b)), Some((c, d))) => Some((a.min(c), b.max(d))),
             (r, None) | (None, r) => r,
         };
+        self.all.drawn = rows;
         if let Some((y0, y1)) = rows {
             if let Some((l0, l1)) = limb_rows {
                 for y in l0..=l1 {
@@ -384,6 +386,8 @@ struct Layer {
     fixed: Mask,
     fixed_sum: f64,
     scratch: Mask,
+    /// Rows of `scratch` the last evaluation drew (only these need clearing).
+    drawn: Option<(u32, u32)>,
 }
 
 impl Layer {
@@ -393,6 +397,14 @@ impl Layer {
             fixed: Mask::new(cam.width, cam.height),
             fixed_sum: 0.0,
             scratch: Mask::new(cam.width, cam.height),
+            drawn: None,
+        }
+    }
+
+    /// Clears what the last evaluation drew.
+    fn clear(&mut self) {
+        if let Some((y0, y1)) = self.drawn.take() {
+            self.scratch.clear_rows(y0, y1);
         }
     }
 

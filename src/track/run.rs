@@ -20,6 +20,9 @@ use crate::body::{Camera, Mask};
 use crate::clip::{ClipInfo, Limits};
 use crate::vision::silhouette::{clip_silhouettes, SilhouetteOptions};
 
+/// Largest working height (the tracker's memory and time grow with its square).
+pub const MAX_WORK_HEIGHT: u32 = 1080;
+
 /// Options of [`track_clip`].
 #[derive(Clone, Debug)]
 pub struct ClipTrackOptions {
@@ -138,6 +141,12 @@ pub fn track_clip(
     on_frame: impl FnMut(&TrackedFrame, &Progress) -> ControlFlow<()>,
 ) -> Result<ClipTrack> {
     Camera::validate(1, 1, opts.fov_deg).map_err(anyhow::Error::msg)?;
+    if !(32..=MAX_WORK_HEIGHT).contains(&opts.work_height) {
+        anyhow::bail!(
+            "working height {} must lie between 32 and {MAX_WORK_HEIGHT} rows",
+            opts.work_height
+        );
+    }
     let info = crate::clip::open::probe(path, &opts.limits)?;
     let fps = if info.fps.is_finite() && info.fps > 0.0 {
         info.fps
@@ -151,6 +160,9 @@ pub fn track_clip(
     track_opts.fps = fps;
     let tracker = Tracker::new(work, track_opts);
     let total = (info.frame_count > 0).then_some(info.frame_count as usize);
+    // Options that are wrong for this clip fail before anything is decoded.
+    tracker.check(total)?;
+    let masks = opts.masks || info.is_mask;
 
     let (tx, rx) = sync_channel::<Result<FrameInput>>(4);
     let result = std::thread::scope(|scope| {
@@ -163,7 +175,7 @@ pub fn track_clip(
                 |_, frame, mask| {
                     let input = FrameInput {
                         silhouette: downscale_mask(mask, k),
-                        image: (!opts.masks).then(|| downscale_image(frame, k)),
+                        image: (!masks).then(|| downscale_image(frame, k)),
                     };
                     // The tracker stopped (an error or a cancel): stop decoding.
                     tx.send(Ok(input))
@@ -176,8 +188,13 @@ pub fn track_clip(
         });
         let tracked = tracker.track(rx.iter(), total, on_frame);
         drop(rx);
-        let _ = producer.join();
-        tracked
+        match producer.join() {
+            Ok(()) => tracked,
+            // A bug, not bad input; never a silently shortened motion.
+            Err(_) => Err(TrackError::Input(anyhow::anyhow!(
+                "silhouette extraction failed unexpectedly"
+            ))),
+        }
     });
     let track = result.map_err(|e| match e {
         TrackError::Input(e) => e,

@@ -30,12 +30,15 @@ use super::keyframes::{KeyframeError, Keyframes};
 use super::objective::{sole_height, Evaluator, Target, Weights};
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
-    ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE, SHAPE_COUNT,
-    STANDARD_SHAPE,
+    clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
+    SHAPE_COUNT, STANDARD_SHAPE,
 };
 use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
 use crate::vision::features::{compute, FeatureOptions, FrameFeatures};
+
+/// A silhouette lower than this many pixels is not a person (noise, a speck).
+const MIN_PERSON_HEIGHT: f64 = 8.0;
 
 /// Frames tracked from each initial candidate to choose between them.
 const HYPOTHESIS_FRAMES: usize = 15;
@@ -105,8 +108,9 @@ pub struct FrameInput {
 #[derive(Clone, Debug, PartialEq)]
 pub struct TrackedFrame {
     pub index: usize,
-    /// False when the frame shows no person: its pose is then held from the nearest
-    /// tracked frame and it has no cost or IoU.
+    /// False when the frame shows no person: its pose is then held from the previous
+    /// tracked frame (the first one, before the person appears) and it has no cost
+    /// or IoU.
     pub person: bool,
     pub pose: Pose,
     pub cost: Option<f64>,
@@ -184,13 +188,33 @@ pub struct Tracker {
 
 /// A buffered frame before initialisation.
 struct Pending {
-    target: Target,
+    /// None on frames without a person (nothing to fit there, nothing kept).
+    target: Option<Target>,
     score: f64,
 }
 
 impl Tracker {
     pub fn new(camera: Camera, opts: TrackOptions) -> Tracker {
         Tracker { camera, opts }
+    }
+
+    /// The checks of the options against a clip of `total` frames (when known) that
+    /// need no frame: callers run them before decoding anything.
+    pub fn check(&self, total: Option<usize>) -> Result<(), TrackError> {
+        if let (Some(f), Some(t)) = (self.opts.init_frame, total) {
+            if f >= t {
+                return Err(TrackError::InitOutside { frame: f, count: t });
+            }
+        }
+        if let Some(f) = self.opts.init_frame {
+            if f >= MAX_INIT_FRAME {
+                return Err(TrackError::InitTooLate(f));
+            }
+        }
+        if let Some(t) = total {
+            self.opts.keyframes.check_frames(t)?;
+        }
+        Ok(())
     }
 
     /// Tracks every frame of `frames`, calling `on_frame` after each (frames before
@@ -205,26 +229,14 @@ impl Tracker {
         let started = Instant::now();
         let mut timing = Timing::default();
         let (w, h) = (self.camera.width, self.camera.height);
-        if let (Some(f), Some(t)) = (self.opts.init_frame, total) {
-            if f >= t {
-                return Err(TrackError::InitOutside { frame: f, count: t });
-            }
-        }
-        if let Some(f) = self.opts.init_frame {
-            if f >= MAX_INIT_FRAME {
-                return Err(TrackError::InitTooLate(f));
-            }
-        }
-        if let Some(t) = total {
-            self.opts.keyframes.check_frames(t)?;
-        }
+        self.check(total)?;
         let mut frames = frames.enumerate();
         let mut prev_features: Option<FrameFeatures> = None;
         let next_target = |index: usize,
                            input: FrameInput,
                            prev: &mut Option<FrameFeatures>,
                            timing: &mut Timing|
-         -> Result<(Target, f64), TrackError> {
+         -> Result<(Option<Target>, f64), TrackError> {
             if input.silhouette.width() != w || input.silhouette.height() != h {
                 return Err(TrackError::FrameSize {
                     index,
@@ -242,7 +254,8 @@ impl Tracker {
                 &self.opts.features,
             );
             let score = init_score(&f);
-            let target = Target::new(&f, &self.opts.weights);
+            let target =
+                (f.body_height >= MIN_PERSON_HEIGHT).then(|| Target::new(&f, &self.opts.weights));
             *prev = Some(f);
             timing.features += t0.elapsed().as_secs_f64();
             Ok((target, score))
@@ -255,7 +268,11 @@ impl Tracker {
         loop {
             let enough = match self.opts.init_frame {
                 Some(f) => pending.len() > f,
-                None => person_frames >= self.opts.init_window.max(1),
+                // Enough people seen; or a bounded wait for one to stay a while.
+                None => {
+                    person_frames >= self.opts.init_window.max(1)
+                        || (person_frames > 0 && pending.len() >= MAX_INIT_FRAME)
+                }
             };
             if enough {
                 break;
@@ -266,7 +283,7 @@ impl Tracker {
             };
             let input = input.map_err(TrackError::Input)?;
             let (target, score) = next_target(i, input, &mut prev_features, &mut timing)?;
-            if target.has_person() {
+            if target.is_some() {
                 person_frames += 1;
             }
             pending.push(Pending { target, score });
@@ -282,7 +299,7 @@ impl Tracker {
                 })
             }
             Some(f) => {
-                if !pending[f].target.has_person() {
+                if pending[f].target.is_none() {
                     return Err(TrackError::InitNoPerson(f));
                 }
                 f
@@ -292,40 +309,34 @@ impl Tracker {
                 let best = pending
                     .iter()
                     .enumerate()
-                    .filter(|(_, p)| p.target.has_person())
+                    .filter(|(_, p)| p.target.is_some())
                     .max_by(|a, b| a.1.score.total_cmp(&b.1.score).then(b.0.cmp(&a.0)));
                 match best {
                     Some((i, _)) => i,
                     None if exhausted => return Err(TrackError::NoPerson(pending.len())),
-                    None => unreachable!("the window ends only after a person frame"),
+                    None => return Err(TrackError::NoPerson(pending.len())),
                 }
             }
         };
 
         // Phase 2: initialise.
         let t0 = Instant::now();
+        let init_target = pending[init].target.as_ref().expect("a person frame");
         let (shape, candidates) = match self.opts.initial {
             Some((shape, pose)) => (shape, vec![pose]),
-            None => self.initialise(&pending[init].target),
+            None => self.initialise(init_target),
         };
         let body = Body::new(&shape);
         // Several candidates: keep the one that explains the next frames best.
         let init_pose = if candidates.len() == 1 {
             candidates[0]
         } else {
-            let ahead: Vec<&Target> = pending
-                .iter()
-                .skip(init + 1)
-                .take(HYPOTHESIS_FRAMES)
-                .map(|p| &p.target)
-                .chain(
-                    pending[..init]
-                        .iter()
-                        .rev()
-                        .take(HYPOTHESIS_FRAMES)
-                        .map(|p| &p.target),
-                )
-                .take(HYPOTHESIS_FRAMES)
+            // The frames after the initial one, then (when there are too few) the
+            // ones before it, each run from the candidate with its own history.
+            let after: Vec<usize> = (init + 1..pending.len()).take(HYPOTHESIS_FRAMES).collect();
+            let before: Vec<usize> = (0..init)
+                .rev()
+                .take(HYPOTHESIS_FRAMES - after.len())
                 .collect();
             let mut best: Option<(f64, Pose)> = None;
             for c in &candidates {
@@ -335,12 +346,14 @@ impl Tracker {
                     ground: sole_height(&body, &body.posed(c)),
                     evals: 0,
                 };
-                let mut history = History::new(*c);
-                let total: f64 = ahead
-                    .iter()
-                    .enumerate()
-                    .filter_map(|(i, t)| probe.step(init + 1 + i, t, &mut history).cost)
-                    .sum();
+                let mut total = 0.0;
+                for run in [&after, &before] {
+                    let mut history = History::new(*c);
+                    for &i in run.iter() {
+                        let t = pending[i].target.as_ref();
+                        total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
+                    }
+                }
                 timing.evals += probe.evals;
                 if best.as_ref().is_none_or(|(b, _)| total < *b) {
                     best = Some((total, *c));
@@ -348,13 +361,21 @@ impl Tracker {
             }
             best.expect("candidates").1
         };
-        let ground = sole_height(&body, &body.posed(&init_pose));
+        // A keyframe on the initial frame overrides what initialisation found.
         let mut search = Search {
             tracker: self,
             body: &body,
-            ground,
+            ground: f64::NEG_INFINITY,
             evals: 0,
         };
+        let mut init_pose = init_pose;
+        let init_key = self.opts.keyframes.at(init).is_some();
+        if init_key {
+            let mut history = History::new(init_pose);
+            init_pose = search.step(init, Some(init_target), &mut history).pose;
+        }
+        let ground = sole_height(&body, &body.posed(&init_pose));
+        search.ground = ground;
         let mut results: Vec<Option<TrackedFrame>> = vec![None; pending.len()];
         let mut done = 0usize;
         let mut emit =
@@ -371,14 +392,7 @@ impl Tracker {
                     ControlFlow::Break(()) => Err(TrackError::Canceled),
                 }
             };
-        // A keyframe on the initial frame overrides what initialisation found.
-        let mut init_pose = init_pose;
-        let init_key = self.opts.keyframes.at(init).is_some();
-        if init_key {
-            let mut history = History::new(init_pose);
-            init_pose = search.step(init, &pending[init].target, &mut history).pose;
-        }
-        let (cost, iou) = search.measure(&pending[init].target, &init_pose);
+        let (cost, iou) = search.measure(init_target, &init_pose);
         let first = TrackedFrame {
             index: init,
             person: true,
@@ -394,12 +408,12 @@ impl Tracker {
         let t0 = Instant::now();
         let mut history = History::new(init_pose);
         for i in (0..init).rev() {
-            let f = search.step(i, &pending[i].target, &mut history);
+            let f = search.step(i, pending[i].target.as_ref(), &mut history);
             results[i] = Some(emit(f, &mut done)?);
         }
         let mut history = History::new(init_pose);
         for (i, p) in pending.iter().enumerate().skip(init + 1) {
-            let f = search.step(i, &p.target, &mut history);
+            let f = search.step(i, p.target.as_ref(), &mut history);
             results[i] = Some(emit(f, &mut done)?);
         }
         timing.search += t0.elapsed().as_secs_f64();
@@ -411,7 +425,7 @@ impl Tracker {
             let input = input.map_err(TrackError::Input)?;
             let (target, _) = next_target(i, input, &mut prev_features, &mut timing)?;
             let t0 = Instant::now();
-            let f = search.step(i, &target, &mut history);
+            let f = search.step(i, target.as_ref(), &mut history);
             timing.search += t0.elapsed().as_secs_f64();
             out.push(emit(f, &mut done)?);
         }
@@ -424,7 +438,7 @@ impl Tracker {
             self.opts.keyframes.check_frames(out.len())?;
         }
         hold_missing(&mut out);
-        timing.evals = search.evals;
+        timing.evals += search.evals;
         timing.total = started.elapsed().as_secs_f64();
         Ok(Track {
             camera: self.camera.clone(),
@@ -632,8 +646,13 @@ impl Search<'_> {
     }
 
     /// Tracks one frame from the history (its neighbour in time).
-    fn step(&mut self, index: usize, target: &Target, history: &mut History) -> TrackedFrame {
-        if !target.has_person() {
+    fn step(
+        &mut self,
+        index: usize,
+        target: Option<&Target>,
+        history: &mut History,
+    ) -> TrackedFrame {
+        let Some(target) = target else {
             history.gap();
             return TrackedFrame {
                 index,
@@ -643,7 +662,7 @@ impl Search<'_> {
                 iou: None,
                 keyframe: false,
             };
-        }
+        };
         let opts = &self.tracker.opts;
         let prev = history.last;
         let mut predicted = prev;
@@ -652,7 +671,9 @@ impl Search<'_> {
                 predicted[k] += prev[k] - before[k];
             }
         }
-        let (keyed, keyframe) = opts.keyframes.start_pose(index, &predicted);
+        clamp_to_limits(&mut predicted);
+        let (mut keyed, keyframe) = opts.keyframes.start_pose(index, &predicted);
+        clamp_to_limits(&mut keyed);
         let mut fixed = [false; MOTION_COUNT];
         if let Some(kf) = opts.keyframes.at(index) {
             for &(k, _) in &kf.params {
@@ -858,8 +879,8 @@ fn simplex_options(max_evals: usize) -> SimplexOptions {
     }
 }
 
-/// Frames without a person take the pose of the nearest tracked frame (earlier
-/// frames first).
+/// Frames without a person take the pose of the previous tracked frame (those
+/// before the person appears, the first tracked one).
 fn hold_missing(frames: &mut [TrackedFrame]) {
     let Some(first) = frames.iter().position(|f| f.person) else {
         return;
