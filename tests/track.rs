@@ -360,3 +360,54 @@ fn keyframes_set_the_pose_on_their_frame() {
     assert_eq!((f.params[elbow], f.params[knee]), (77.0, 33.0));
     assert!(m.frames[7].keyframe && m.frames[10].keyframe && !m.frames[11].keyframe);
 }
+
+/// A person who leaves and comes back elsewhere is found again: 10 frames of the
+/// run, 4 empty frames, then the rest of the run 70 pixels further right.
+#[test]
+fn a_person_who_comes_back_elsewhere_is_found_again() {
+    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
+    let opts = SynthOptions {
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let mut masks = Vec::new();
+    synthesize_with(&bvh, "fixture", &opts, |f| {
+        masks.push(f.mask.clone());
+        Ok(())
+    })
+    .unwrap();
+    let (w, h) = (opts.width, opts.height);
+    let shifted = |m: &Mask, dx: u32| {
+        let mut out = Mask::new(w, h);
+        for y in 0..h {
+            for x in 0..w - dx {
+                if m.get(x, y) {
+                    out.set(x + dx, y, true);
+                }
+            }
+        }
+        out
+    };
+    let mut clip: Vec<Mask> = masks[..10].to_vec();
+    clip.extend((0..4).map(|_| Mask::new(w, h)));
+    clip.extend(masks[10..].iter().map(|m| shifted(m, 70)));
+    let o = TrackOptions {
+        init_frame: Some(0),
+        ..TrackOptions::default()
+    };
+    let tracker = Tracker::new(Camera::new(w, h, opts.fov_deg), o);
+    let inputs = clip.iter().map(|m| {
+        Ok(FrameInput {
+            silhouette: m.clone(),
+            image: None,
+        })
+    });
+    let track = tracker
+        .track(inputs, Some(clip.len()), |_, _| ControlFlow::Continue(()))
+        .unwrap();
+    assert!(track.frames[10..14].iter().all(|f| !f.person));
+    let back: Vec<f64> = track.frames[14..].iter().map(|f| f.iou.unwrap()).collect();
+    println!("IoU after coming back: {back:.2?}");
+    let mean = back.iter().sum::<f64>() / back.len() as f64;
+    assert!(mean >= 0.6, "mean IoU after coming back {mean:.3}");
+}

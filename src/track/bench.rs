@@ -249,7 +249,8 @@ pub fn run_clip(
         for j in JOINTS {
             let p = posed.joint(j);
             pred3.push(camera.to_contract(&p));
-            pred2.push(camera.project(&p).unwrap_or([f64::NAN; 2]));
+            // A joint behind the camera counts as far off (a NaN would poison the means).
+            pred2.push(camera.project(&p).unwrap_or([-1.0e4; 2]));
             let s = map.source[j.index()];
             true3.push(tf.joints3d[s]);
             true2.push(tf.joints2d[s]);

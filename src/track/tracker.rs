@@ -599,6 +599,8 @@ fn init_score(f: &FrameFeatures) -> f64 {
 struct History {
     last: Pose,
     before: Option<Pose>,
+    /// The person was absent since `last` (they may come back elsewhere).
+    away: bool,
 }
 
 impl History {
@@ -606,17 +608,20 @@ impl History {
         History {
             last: pose,
             before: None,
+            away: false,
         }
     }
 
     fn push(&mut self, pose: Pose) {
         self.before = Some(self.last);
         self.last = pose;
+        self.away = false;
     }
 
     /// Forget the velocity (after frames without a person).
     fn gap(&mut self) {
         self.before = None;
+        self.away = true;
     }
 }
 
@@ -664,7 +669,12 @@ impl Search<'_> {
             };
         };
         let opts = &self.tracker.opts;
-        let prev = history.last;
+        let mut prev = history.last;
+        if history.away {
+            // Back after frames without a person, maybe elsewhere: move the body over
+            // the silhouette (same depth) before searching around it.
+            self.replace_over(target, &mut prev);
+        }
         let mut predicted = prev;
         if let Some(before) = history.before {
             for k in 0..MOTION_COUNT {
@@ -718,6 +728,24 @@ impl Search<'_> {
             cost: Some(best_f),
             iou: Some(iou),
             keyframe,
+        }
+    }
+
+    /// Shifts the root in the image plane so that the model's silhouette box is
+    /// centred on the person's.
+    fn replace_over(&self, target: &Target, pose: &mut Pose) {
+        let cam = &self.tracker.camera;
+        let mut m = Mask::new(cam.width, cam.height);
+        self.evaluator(target).render(pose, &mut m);
+        let (Some(a), Some(b)) = (mask_bbox(&m), mask_bbox(&target.silhouette)) else {
+            return;
+        };
+        let centre = |b: [u32; 4]| [(b[0] + b[2]) as f64 / 2.0, (b[1] + b[3]) as f64 / 2.0];
+        let (from, to) = (centre(a), centre(b));
+        let depth = -pose[ix::ROOT_TZ];
+        if depth > 0.0 {
+            pose[ix::ROOT_TX] += (to[0] - from[0]) * depth / cam.fx;
+            pose[ix::ROOT_TY] -= (to[1] - from[1]) * depth / cam.fy;
         }
     }
 
