@@ -39,6 +39,38 @@ enum Command {
     Bench(BenchArgs),
 }
 
+/// The objective's weights (the paper's defaults).
+#[derive(Args)]
+struct WeightArgs {
+    /// Weight of the edge term (Eq. 4).
+    #[arg(long, default_value_t = 20.0)]
+    w_edge: f64,
+    /// Weight of the hand/foot/head term (Eq. 5).
+    #[arg(long, default_value_t = 20.0)]
+    w_extremity: f64,
+    /// Weight of the arm/leg region term (Eq. 6).
+    #[arg(long, default_value_t = 20.0)]
+    w_region: f64,
+}
+
+impl WeightArgs {
+    fn apply(&self, w: &mut monocap::track::objective::Weights) -> Result<()> {
+        for (flag, v) in [
+            ("--w-edge", self.w_edge),
+            ("--w-extremity", self.w_extremity),
+            ("--w-region", self.w_region),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                anyhow::bail!("{flag} {v}: expected a number ≥ 0");
+            }
+        }
+        w.edge = self.w_edge;
+        w.extremity = self.w_extremity;
+        w.region = self.w_region;
+        Ok(())
+    }
+}
+
 #[derive(Args)]
 struct TrackArgs {
     /// MP4/AVI (H.264, MJPEG), Y4M, GIF/APNG/WebP, ZIP/TAR of frames or of masks.
@@ -70,15 +102,8 @@ struct TrackArgs {
     /// The clip is a sequence of masks: no background subtraction.
     #[arg(long)]
     masks: bool,
-    /// Weight of the edge term (Eq. 4).
-    #[arg(long, default_value_t = 20.0)]
-    w_edge: f64,
-    /// Weight of the hand/foot/head term (Eq. 5).
-    #[arg(long, default_value_t = 20.0)]
-    w_extremity: f64,
-    /// Weight of the arm/leg region term (Eq. 6).
-    #[arg(long, default_value_t = 20.0)]
-    w_region: f64,
+    #[command(flatten)]
+    weights: WeightArgs,
     /// Weight w of the inside distance in the coremap (Eq. 3).
     #[arg(long, default_value_t = 1.0)]
     w_core: f64,
@@ -113,15 +138,8 @@ struct BenchArgs {
     /// Start from the true shape and pose (measures tracking apart from initialisation).
     #[arg(long)]
     oracle_init: bool,
-    /// Weight of the edge term (Eq. 4).
-    #[arg(long, default_value_t = 20.0)]
-    w_edge: f64,
-    /// Weight of the hand/foot/head term (Eq. 5).
-    #[arg(long, default_value_t = 20.0)]
-    w_extremity: f64,
-    /// Weight of the arm/leg region term (Eq. 6).
-    #[arg(long, default_value_t = 20.0)]
-    w_region: f64,
+    #[command(flatten)]
+    weights: WeightArgs,
 }
 
 #[derive(Args)]
@@ -396,9 +414,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
-    opts.track.weights.edge = a.w_edge;
-    opts.track.weights.extremity = a.w_extremity;
-    opts.track.weights.region = a.w_region;
+    a.weights.apply(&mut opts.track.weights)?;
     println!(
         "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>7} {:>6}",
         "clip",
@@ -493,15 +509,8 @@ fn track_command(a: TrackArgs) -> Result<()> {
     if a.restarts == 0 || a.restarts > 20 {
         anyhow::bail!("--restarts {}: expected 1 to 20", a.restarts);
     }
-    for (flag, v) in [
-        ("--w-edge", a.w_edge),
-        ("--w-extremity", a.w_extremity),
-        ("--w-region", a.w_region),
-        ("--w-core", a.w_core),
-    ] {
-        if !(v.is_finite() && v >= 0.0) {
-            anyhow::bail!("{flag} {v}: expected a number ≥ 0");
-        }
+    if !(a.w_core.is_finite() && a.w_core >= 0.0) {
+        anyhow::bail!("--w-core {}: expected a number ≥ 0", a.w_core);
     }
     let mut opts = ClipTrackOptions {
         fov_deg: a.fov_deg,
@@ -512,9 +521,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     opts.silhouettes.background.empty = parse_empty_frames(&a.empty_frames)?;
     opts.track.restarts = a.restarts;
     opts.track.init_frame = a.init_frame;
-    opts.track.weights.edge = a.w_edge;
-    opts.track.weights.extremity = a.w_extremity;
-    opts.track.weights.region = a.w_region;
+    a.weights.apply(&mut opts.track.weights)?;
     opts.track.features.core_weight = a.w_core;
     if let Some(k) = &a.keyframes {
         opts.track.keyframes = read_keyframes(k)?;

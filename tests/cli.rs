@@ -3,22 +3,11 @@
 
 mod common;
 
-use common::TempDir;
+use common::{monocap, s, TempDir};
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
-
-fn monocap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monocap"))
-        .args(args)
-        .output()
-        .expect("the monocap binary runs")
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
 
 /// `synth` on the fixture into `out`, with `extra` arguments.
 fn synth(out: &Path, extra: &[&str]) -> Output {

@@ -5,9 +5,9 @@ mod common;
 
 use std::ops::ControlFlow;
 use std::path::Path;
-use std::process::{Command, Output};
+use std::process::Output;
 
-use common::TempDir;
+use common::{monocap, s, TempDir};
 use monocap::body::{Body, Camera, Mask};
 use monocap::clip::write::{self, Frame};
 use monocap::motion::bvh::Bvh;
@@ -18,15 +18,30 @@ use monocap::track::tracker::{FrameInput, TrackOptions, Tracker};
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
 
-fn monocap(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_monocap"))
-        .args(args)
-        .output()
-        .expect("the monocap binary runs")
+/// The fixture's run as a silhouette clip: its masks, truth and options.
+fn run_masks() -> (Vec<Mask>, monocap::synth::Truth, SynthOptions) {
+    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
+    let opts = SynthOptions {
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let mut masks = Vec::new();
+    let truth = synthesize_with(&bvh, "fixture", &opts, |f| {
+        masks.push(f.mask.clone());
+        Ok(())
+    })
+    .unwrap();
+    (masks, truth, opts)
 }
 
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+/// Masks as the tracker's input.
+fn inputs(masks: &[Mask]) -> impl Iterator<Item = anyhow::Result<FrameInput>> + '_ {
+    masks.iter().map(|m| {
+        Ok(FrameInput {
+            silhouette: m.clone(),
+            image: None,
+        })
+    })
 }
 
 /// Non-zero exit, one line on stderr mentioning `needle`, no panic.
@@ -46,26 +61,11 @@ fn assert_fails_with(what: &str, out: &Output, needle: &str) {
 /// must follow it (IoU and joint positions against the capture's truth).
 #[test]
 fn a_short_synthetic_clip_tracks_end_to_end() {
-    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
-    let opts = SynthOptions {
-        style: Style::Silhouette,
-        ..SynthOptions::default()
-    };
-    let mut masks = Vec::new();
-    let truth = synthesize_with(&bvh, "fixture", &opts, |f| {
-        masks.push(f.mask.clone());
-        Ok(())
-    })
-    .unwrap();
+    let (masks, truth, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let tracker = Tracker::new(cam.clone(), TrackOptions::default());
     let mut reported = Vec::new();
-    let inputs = masks.iter().map(|m| {
-        Ok(FrameInput {
-            silhouette: m.clone(),
-            image: None,
-        })
-    });
+    let inputs = inputs(&masks);
     let track = tracker
         .track(inputs, Some(masks.len()), |f, p| {
             reported.push((f.index, p.frames_done));
@@ -102,28 +102,13 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
 
 #[test]
 fn canceling_stops_the_tracker() {
-    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
-    let opts = SynthOptions {
-        style: Style::Silhouette,
-        ..SynthOptions::default()
-    };
-    let mut masks = Vec::new();
-    synthesize_with(&bvh, "fixture", &opts, |f| {
-        masks.push(f.mask.clone());
-        Ok(())
-    })
-    .unwrap();
+    let (masks, _, _) = run_masks();
     let o = TrackOptions {
         restarts: 1,
         ..TrackOptions::default()
     };
     let tracker = Tracker::new(Camera::new(320, 240, 55.0), o);
-    let inputs = masks.iter().map(|m| {
-        Ok(FrameInput {
-            silhouette: m.clone(),
-            image: None,
-        })
-    });
+    let inputs = inputs(&masks);
     let mut seen = 0;
     let r = tracker.track(inputs, None, |_, _| {
         seen += 1;
@@ -365,17 +350,7 @@ fn keyframes_set_the_pose_on_their_frame() {
 /// run, 4 empty frames, then the rest of the run 70 pixels further right.
 #[test]
 fn a_person_who_comes_back_elsewhere_is_found_again() {
-    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
-    let opts = SynthOptions {
-        style: Style::Silhouette,
-        ..SynthOptions::default()
-    };
-    let mut masks = Vec::new();
-    synthesize_with(&bvh, "fixture", &opts, |f| {
-        masks.push(f.mask.clone());
-        Ok(())
-    })
-    .unwrap();
+    let (masks, _, opts) = run_masks();
     let (w, h) = (opts.width, opts.height);
     let shifted = |m: &Mask, dx: u32| {
         let mut out = Mask::new(w, h);
@@ -396,12 +371,7 @@ fn a_person_who_comes_back_elsewhere_is_found_again() {
         ..TrackOptions::default()
     };
     let tracker = Tracker::new(Camera::new(w, h, opts.fov_deg), o);
-    let inputs = clip.iter().map(|m| {
-        Ok(FrameInput {
-            silhouette: m.clone(),
-            image: None,
-        })
-    });
+    let inputs = inputs(&clip);
     let track = tracker
         .track(inputs, Some(clip.len()), |_, _| ControlFlow::Continue(()))
         .unwrap();

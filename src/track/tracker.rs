@@ -857,33 +857,23 @@ fn limb_grid(ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64) {
     const HIP_X: [f64; 4] = [-30.0, 0.0, 30.0, 70.0];
     const HIP_Z: [f64; 2] = [0.0, 25.0];
     const KNEE: [f64; 4] = [0.0, 30.0, 60.0, 100.0];
-    for (shoulder, elbow) in [(ix::L_SHOULDER, ix::L_ELBOW), (ix::R_SHOULDER, ix::R_ELBOW)] {
-        ev.focus(best, &[shoulder, shoulder + 1, elbow]);
-        for x in ARM_X {
-            for z in ARM_Z {
-                for e in ELBOW {
+    // (first angle of the limb's root joint, its bend, grids of root x, root z, bend)
+    type Limb<'g> = (usize, usize, &'g [f64], &'g [f64], &'g [f64]);
+    let limbs: [Limb; 4] = [
+        (ix::L_SHOULDER, ix::L_ELBOW, &ARM_X, &ARM_Z, &ELBOW),
+        (ix::R_SHOULDER, ix::R_ELBOW, &ARM_X, &ARM_Z, &ELBOW),
+        (ix::L_HIP, ix::L_KNEE, &HIP_X, &HIP_Z, &KNEE),
+        (ix::R_HIP, ix::R_KNEE, &HIP_X, &HIP_Z, &KNEE),
+    ];
+    for (root, bend, xs, zs, bends) in limbs {
+        ev.focus(best, &[root, root + 1, bend]);
+        for &x in xs {
+            for &z in zs {
+                for &e in bends {
                     let mut p = *best;
-                    p[shoulder] = x;
-                    p[shoulder + 1] = z;
-                    p[elbow] = e;
-                    let f = ev.cost(&p);
-                    if f < *best_f {
-                        *best_f = f;
-                        *best = p;
-                    }
-                }
-            }
-        }
-    }
-    for (hip, knee) in [(ix::L_HIP, ix::L_KNEE), (ix::R_HIP, ix::R_KNEE)] {
-        ev.focus(best, &[hip, hip + 1, knee]);
-        for x in HIP_X {
-            for z in HIP_Z {
-                for k in KNEE {
-                    let mut p = *best;
-                    p[hip] = x;
-                    p[hip + 1] = z;
-                    p[knee] = k;
+                    p[root] = x;
+                    p[root + 1] = z;
+                    p[bend] = e;
                     let f = ev.cost(&p);
                     if f < *best_f {
                         *best_f = f;
