@@ -44,6 +44,27 @@ fn inputs(masks: &[Mask]) -> impl Iterator<Item = anyhow::Result<FrameInput>> + 
     })
 }
 
+/// Runs `monocap synth` on the fixture as a silhouette clip at `clip`, with `extra`
+/// arguments.
+fn synth_masks(clip: &Path, extra: &[&str]) {
+    let mut args = vec![
+        "synth",
+        "--bvh",
+        FIXTURE,
+        "--out",
+        s(clip),
+        "--style",
+        "silhouette",
+    ];
+    args.extend_from_slice(extra);
+    let out = monocap(&args);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// Non-zero exit, one line on stderr mentioning `needle`, no panic.
 fn assert_fails_with(what: &str, out: &Output, needle: &str) {
     let stderr = String::from_utf8_lossy(&out.stderr);
@@ -129,22 +150,7 @@ fn canceling_stops_the_tracker() {
 fn track_writes_bvh_json_and_model_masks() {
     let dir = TempDir::new("track");
     let clip = dir.path("run.zip");
-    let out = monocap(&[
-        "synth",
-        "--bvh",
-        FIXTURE,
-        "--out",
-        s(&clip),
-        "--style",
-        "silhouette",
-        "--empty-frames",
-        "3",
-    ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    synth_masks(&clip, &["--empty-frames", "3"]);
     let (bvh, json, mm) = (dir.path("m.bvh"), dir.path("m.json"), dir.path("mm.zip"));
     let out = monocap(&[
         "track",
@@ -253,16 +259,7 @@ fn bad_input_gives_one_clear_line() {
 
     // Keyframes: outside the clip, unknown parameter, broken JSON.
     let clip = dir.path("run.zip");
-    let r = monocap(&[
-        "synth",
-        "--bvh",
-        FIXTURE,
-        "--out",
-        s(&clip),
-        "--style",
-        "silhouette",
-    ]);
-    assert!(r.status.success());
+    synth_masks(&clip, &[]);
     let kf = dir.write(
         "kf.json",
         br#"{"keyframes": [{"frame": 500, "range": 3, "params": {"l_elbow": 40}}]}"#,
@@ -311,16 +308,7 @@ fn bad_input_gives_one_clear_line() {
 fn keyframes_set_the_pose_on_their_frame() {
     let dir = TempDir::new("track-kf");
     let clip = dir.path("run.zip");
-    let r = monocap(&[
-        "synth",
-        "--bvh",
-        FIXTURE,
-        "--out",
-        s(&clip),
-        "--style",
-        "silhouette",
-    ]);
-    assert!(r.status.success());
+    synth_masks(&clip, &[]);
     let kf = dir.write(
         "kf.json",
         br#"{"keyframes": [{"frame": 8, "range": 2, "params": {"l_elbow": 77.0, "r_knee": 33.0}}]}"#,

@@ -219,8 +219,8 @@ impl<'a> Evaluator<'a> {
 
     /// Every part moves again.
     pub fn unfocus(&mut self) {
-        self.all = Layer::new(self.cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect());
-        self.limbs = Layer::new(self.cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect());
+        self.all.unfix((0..PART_COUNT).filter(|&i| !is_limb(i)));
+        self.limbs.unfix((0..PART_COUNT).filter(|&i| is_limb(i)));
     }
 
     /// F(β) (+∞ when a constraint is violated).
@@ -399,6 +399,15 @@ impl Layer {
             scratch: Mask::new(cam.width, cam.height),
             drawn: None,
         }
+    }
+
+    /// Nothing fixed any more; `moving` are all the layer's parts (the masks are
+    /// kept: an evaluator is re-focused many times per frame).
+    fn unfix(&mut self, moving: impl Iterator<Item = usize>) {
+        self.moving.clear();
+        self.moving.extend(moving);
+        self.fixed.clear();
+        self.fixed_sum = 0.0;
     }
 
     /// Clears what the last evaluation drew.

@@ -340,12 +340,7 @@ impl Tracker {
                 .collect();
             let mut best: Option<(f64, Pose)> = None;
             for c in &candidates {
-                let mut probe = Search {
-                    tracker: self,
-                    body: &body,
-                    ground: sole_height(&body, &body.posed(c)),
-                    evals: 0,
-                };
+                let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
                 let mut total = 0.0;
                 for run in [&after, &before] {
                     let mut history = History::new(*c);
@@ -362,12 +357,7 @@ impl Tracker {
             best.expect("candidates").1
         };
         // A keyframe on the initial frame overrides what initialisation found.
-        let mut search = Search {
-            tracker: self,
-            body: &body,
-            ground: f64::NEG_INFINITY,
-            evals: 0,
-        };
+        let mut search = Search::new(self, &body, f64::NEG_INFINITY);
         let mut init_pose = init_pose;
         let init_key = self.opts.keyframes.at(init).is_some();
         if init_key {
@@ -479,12 +469,7 @@ impl Tracker {
         base[ix::L_SHOULDER + 1] = 15.0;
         base[ix::R_SHOULDER + 1] = 15.0;
 
-        let wide = Search {
-            tracker: self,
-            body: &standard,
-            ground: f64::NEG_INFINITY,
-            evals: 0,
-        };
+        let wide = Search::new(self, &standard, f64::NEG_INFINITY);
         let mut fits: Vec<(f64, Pose)> = (0..12)
             .map(|k| {
                 let mut p = base;
@@ -548,23 +533,14 @@ impl Tracker {
             shape.copy_from_slice(&r.x[..SHAPE_COUNT]);
             pose[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&r.x[SHAPE_COUNT..]);
             let body = Body::new(&shape);
-            let s = Search {
-                tracker: self,
-                body: &body,
-                ground: f64::NEG_INFINITY,
-                evals: 0,
-            };
-            pose = s.fit_wide(target, pose, 2).0;
+            pose = Search::new(self, &body, f64::NEG_INFINITY)
+                .fit_wide(target, pose, 2)
+                .0;
         }
         let mut poses = vec![pose];
         if let Some(o) = other {
             let body = Body::new(&shape);
-            let s = Search {
-                tracker: self,
-                body: &body,
-                ground: f64::NEG_INFINITY,
-                evals: 0,
-            };
+            let s = Search::new(self, &body, f64::NEG_INFINITY);
             let mut o = o;
             o[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&pose[ix::ROOT_TX..=ix::ROOT_TZ]);
             poses.push(s.fit_wide(target, o, 3).0);
@@ -632,7 +608,17 @@ struct Search<'a> {
     evals: u64,
 }
 
-impl Search<'_> {
+impl<'a> Search<'a> {
+    /// A search with no ground constraint when `ground` is −∞.
+    fn new(tracker: &'a Tracker, body: &'a Body, ground: f64) -> Search<'a> {
+        Search {
+            tracker,
+            body,
+            ground,
+            evals: 0,
+        }
+    }
+
     fn evaluator<'b>(&'b self, target: &'b Target) -> Evaluator<'b> {
         let ground = self.ground.is_finite().then_some(self.ground);
         Evaluator::new(
