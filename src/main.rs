@@ -27,6 +27,13 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The HTTP service: uploads, a job queue, progress over server-sent events, motion files.
+    Serve(ServeArgs),
+    /// API keys of the service.
+    Keys {
+        #[command(subcommand)]
+        command: KeysCommand,
+    },
     /// Print what a clip is (JSON: container, codec, width, height, fps, frame_count, duration_s).
     Probe(ProbeArgs),
     /// Extract the person's silhouette from every frame of a clip.
@@ -37,6 +44,67 @@ enum Command {
     Track(TrackArgs),
     /// Accuracy benchmark: synthesise clips from motion capture, track them, compare.
     Bench(BenchArgs),
+}
+
+#[derive(Args, serde::Serialize)]
+struct ServeArgs {
+    /// Address and port to listen on [default: 127.0.0.1:8080].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    listen: Option<String>,
+    /// Folder of the database and files [default: ./monocap-data].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    data_dir: Option<PathBuf>,
+    /// Jobs tracking at once [default and most: the machine's cores].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    workers: Option<usize>,
+    /// Largest upload in MiB [default: 2048].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_upload_mb: Option<u64>,
+    /// Most jobs waiting in the queue [default: 1000].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_queue: Option<u64>,
+    /// Attempts before a job that keeps dying with the process fails [default: 3].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_attempts: Option<u32>,
+    /// Longest a job may track in seconds, 0 for no limit [default: 21600].
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    job_timeout_s: Option<u64>,
+    /// Most frames a clip may have.
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_frames: Option<u64>,
+    /// Most pixels a frame may have.
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    max_pixels: Option<u64>,
+    /// Log JSON lines instead of text.
+    #[arg(long)]
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    log_json: bool,
+    /// A TOML file with any of these settings (flags and MONOCAP_* variables win).
+    #[arg(long)]
+    #[serde(skip)]
+    config: Option<PathBuf>,
+}
+
+#[derive(Subcommand)]
+enum KeysCommand {
+    /// Create an API key; its token is printed once, alone on the last line.
+    Create {
+        /// Who the key is for (e.g. ci-bot).
+        #[arg(long)]
+        name: String,
+        /// Folder of the database [default: ./monocap-data, or MONOCAP_DATA_DIR].
+        #[arg(long, env = "MONOCAP_DATA_DIR", default_value = "monocap-data")]
+        data_dir: PathBuf,
+    },
 }
 
 /// The objective's weights (the paper's defaults).
@@ -259,6 +327,18 @@ fn run(cli: Cli) -> Result<()> {
         Command::Silhouettes(a) => silhouettes_command(a),
         Command::Synth(a) => synth_command(a),
         Command::Track(a) => track_command(a),
+        Command::Serve(a) => serve_command(a),
+        Command::Keys {
+            command: KeysCommand::Create { name, data_dir },
+        } => runtime()?.block_on(async {
+            let (id, token) = monocap::api::server::create_key(&data_dir, &name).await?;
+            println!(
+                "created API key {name:?} (id {id}) in {}; its token, shown only now:",
+                data_dir.display()
+            );
+            println!("{token}");
+            Ok(())
+        }),
         Command::Bench(a) => bench_command(a),
     }
 }
@@ -269,26 +349,32 @@ fn probe_command(a: ProbeArgs) -> Result<()> {
     Ok(())
 }
 
+fn runtime() -> Result<tokio::runtime::Runtime> {
+    tokio::runtime::Builder::new_multi_thread()
+        .enable_all()
+        .build()
+        .context("cannot start the async runtime")
+}
+
+fn serve_command(a: ServeArgs) -> Result<()> {
+    use monocap::api::server::{serve, ServeConfig};
+    let overrides = serde_json::to_value(&a)?;
+    let cfg = ServeConfig::load(a.config.as_deref(), overrides)?;
+    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info,sqlx=warn,tower_http=info"));
+    let logs = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr);
+    if cfg.log_json {
+        logs.json().init();
+    } else {
+        logs.init();
+    }
+    runtime()?.block_on(serve(cfg))
+}
+
 fn parse_empty_frames(text: &str) -> Result<EmptyFrames> {
-    Ok(match text {
-        "auto" => EmptyFrames::Auto,
-        "none" => EmptyFrames::None,
-        range => {
-            let (a, b) = range.split_once("..").with_context(|| {
-                format!("--empty-frames {range:?}: expected auto, none or a range A..B")
-            })?;
-            let parse = |v: &str| {
-                v.trim().parse::<usize>().with_context(|| {
-                    format!("--empty-frames {range:?}: {v:?} is not a frame number")
-                })
-            };
-            let (a, b) = (parse(a)?, parse(b)?);
-            if a >= b {
-                anyhow::bail!("--empty-frames {range:?}: the range is empty");
-            }
-            EmptyFrames::Range(a, b)
-        }
-    })
+    EmptyFrames::parse(text).map_err(|e| anyhow!("--empty-frames {e}"))
 }
 
 fn silhouettes_command(a: SilhouettesArgs) -> Result<()> {
@@ -471,35 +557,15 @@ fn bench_command(a: BenchArgs) -> Result<()> {
 }
 
 /// What `-o` writes, from its extension.
-#[derive(Clone, Copy, PartialEq)]
-enum MotionFormat {
-    Bvh,
-    Json,
-}
-
-fn motion_format(path: &std::path::Path) -> Result<MotionFormat> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("bvh") => Ok(MotionFormat::Bvh),
-        Some("json") => Ok(MotionFormat::Json),
-        _ => anyhow::bail!(
-            "{}: unknown motion format (use a .bvh or .json extension)",
-            path.display()
-        ),
-    }
-}
-
 fn track_command(a: TrackArgs) -> Result<()> {
     use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-    use monocap::motion::json::MotionJson;
+    use monocap::motion::files::{write_model_masks, write_motion, MotionFormat};
     use monocap::track::run::{read_keyframes, track_clip, ClipTrackOptions};
     use std::io::IsTerminal;
 
-    let format = motion_format(&a.out)?;
+    let format = MotionFormat::from_path(&a.out)?;
     if let Some(p) = &a.json {
-        if motion_format(p)? != MotionFormat::Json {
+        if MotionFormat::from_path(p)? != MotionFormat::Json {
             anyhow::bail!("--json {}: expected a .json file", p.display());
         }
     }
@@ -552,46 +618,12 @@ fn track_command(a: TrackArgs) -> Result<()> {
     bar.finish_and_clear();
     let secs = start.elapsed().as_secs_f64();
 
-    let motion = MotionJson::new(&done.track, &done.camera, done.fps);
-    let write_json = |path: &std::path::Path| -> Result<()> {
-        let file =
-            File::create(path).with_context(|| format!("cannot create {}", path.display()))?;
-        let mut w = BufWriter::new(file);
-        serde_json::to_writer(&mut w, &motion)?;
-        w.write_all(b"\n")?;
-        w.flush()
-            .with_context(|| format!("cannot write {}", path.display()))
-    };
-    match format {
-        MotionFormat::Json => write_json(&a.out)?,
-        MotionFormat::Bvh => {
-            let body = monocap::body::Body::new(&done.track.shape);
-            let poses: Vec<_> = done.track.frames.iter().map(|f| f.pose).collect();
-            let bvh = monocap::motion::export::monocap_bvh(&body.skeleton, &poses, done.fps)?;
-            let file = File::create(&a.out)
-                .with_context(|| format!("cannot create {}", a.out.display()))?;
-            let mut w = BufWriter::new(file);
-            bvh.write(&mut w)?;
-            w.flush()
-                .with_context(|| format!("cannot write {}", a.out.display()))?;
-        }
-    }
+    write_motion(&done, format, &a.out)?;
     if let Some(p) = &a.json {
-        write_json(p)?;
+        write_motion(&done, MotionFormat::Json, p)?;
     }
     if let Some(p) = &a.model_masks {
-        let cam = &done.camera;
-        let body = monocap::body::Body::new(&done.track.shape);
-        let mut out = write::create(p, cam.width, cam.height, done.fps)?;
-        let mut m = monocap::body::Mask::new(cam.width, cam.height);
-        for f in &done.track.frames {
-            m.clear();
-            if f.person {
-                monocap::body::raster::render_mask(&body, &body.posed(&f.pose), cam, &mut m);
-            }
-            out.push(write::Frame::Gray(&m.to_gray()))?;
-        }
-        out.finish()?;
+        write_model_masks(&done, p)?;
     }
     let frames = done.track.frames.len();
     let people = done.track.frames.iter().filter(|f| f.person).count();

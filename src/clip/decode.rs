@@ -11,7 +11,7 @@ use image::RgbImage;
 
 /// What a clip is, as far as its container says (or, failing that, as far as
 /// decoding it showed).
-#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct ClipInfo {
     /// `mp4`, `avi`, `y4m`, `gif`, `apng`, `webp`, `zip`, `tar`, or what ffmpeg names.
     pub container: String,

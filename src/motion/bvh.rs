@@ -323,7 +323,7 @@ impl Bvh {
                 "frame_time {frame_time} must be positive and finite"
             )));
         }
-        if data.len() % channels != 0 {
+        if !data.len().is_multiple_of(channels) {
             return Err(BvhError::Invalid(format!(
                 "{} numbers of frame data are not whole frames of {channels} channels",
                 data.len()

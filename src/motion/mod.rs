@@ -2,5 +2,6 @@
 
 pub mod bvh;
 pub mod export;
+pub mod files;
 pub mod json;
 pub mod retarget;

@@ -287,6 +287,21 @@ impl Keyframes {
         finish(list)
     }
 
+    /// The keyframes counted from clip frame `first` (for tracking a range of the
+    /// clip that starts there): an error names a keyframe before it.
+    pub fn shifted(&self, first: usize) -> Result<Keyframes, String> {
+        let mut list = self.list.clone();
+        for kf in &mut list {
+            kf.frame = kf.frame.checked_sub(first).ok_or_else(|| {
+                format!(
+                    "keyframe at frame {} lies before the first tracked frame {first}",
+                    kf.frame
+                )
+            })?;
+        }
+        Keyframes::from_list(list).map_err(|e| e.to_string())
+    }
+
     /// Validates a list built in code: the same checks as [`Keyframes::parse`] minus
     /// the JSON ones. Each keyframe's parameters are sorted by index.
     pub fn from_list(mut list: Vec<Keyframe>) -> Result<Keyframes, KeyframeError> {

@@ -36,6 +36,9 @@ pub struct ClipTrackOptions {
     /// most this many rows high (silhouettes are extracted at full resolution).
     pub work_height: u32,
     pub limits: Limits,
+    /// Track only these clip frames (half-open). Frame numbers in the options
+    /// (initial frame, keyframes) and in the result stay the clip's.
+    pub frames: Option<(usize, usize)>,
 }
 
 impl Default for ClipTrackOptions {
@@ -47,6 +50,7 @@ impl Default for ClipTrackOptions {
             track: TrackOptions::default(),
             work_height: 288,
             limits: Limits::default(),
+            frames: None,
         }
     }
 }
@@ -158,13 +162,38 @@ pub fn track_clip(
     let work = scaled_camera(&camera, k);
     let mut track_opts = opts.track.clone();
     track_opts.fps = fps;
+    let (first, end) = opts.frames.unwrap_or((0, usize::MAX));
+    if let Some((a, b)) = opts.frames {
+        if info.frame_count > 0 && a as u64 >= info.frame_count {
+            anyhow::bail!(
+                "frames {a}..{b}: the clip has only {} frames",
+                info.frame_count
+            );
+        }
+        if let Some(f) = track_opts.init_frame {
+            if !(a..b).contains(&f) {
+                anyhow::bail!("initial frame {f} lies outside the tracked frames {a}..{b}");
+            }
+            track_opts.init_frame = Some(f - a);
+        }
+        if a > 0 {
+            track_opts.keyframes = track_opts
+                .keyframes
+                .shifted(a)
+                .map_err(anyhow::Error::msg)?;
+        }
+    }
     let tracker = Tracker::new(work, track_opts);
-    let total = (info.frame_count > 0).then_some(info.frame_count as usize);
+    let total =
+        (info.frame_count > 0).then(|| (info.frame_count as usize).min(end).saturating_sub(first));
     // Options that are wrong for this clip fail before anything is decoded.
     tracker.check(total)?;
     let masks = opts.masks || info.is_mask;
 
     let (tx, rx) = sync_channel::<Result<FrameInput>>(4);
+    let past_end = std::sync::atomic::AtomicBool::new(false);
+    let past_end = &past_end;
+    let mut on_frame = on_frame;
     let result = std::thread::scope(|scope| {
         let producer = scope.spawn(move || {
             let sent = clip_silhouettes(
@@ -172,7 +201,14 @@ pub fn track_clip(
                 &opts.limits,
                 &opts.silhouettes,
                 opts.masks,
-                |_, frame, mask| {
+                |i, frame, mask| {
+                    if i < first {
+                        return Ok(());
+                    }
+                    if i >= end {
+                        past_end.store(true, std::sync::atomic::Ordering::Relaxed);
+                        anyhow::bail!("past the last tracked frame");
+                    }
                     let input = FrameInput {
                         silhouette: downscale_mask(mask, k),
                         image: (!masks).then(|| downscale_image(frame, k)),
@@ -183,10 +219,19 @@ pub fn track_clip(
                 },
             );
             if let Err(e) = sent {
-                let _ = tx.send(Err(e));
+                if !past_end.load(std::sync::atomic::Ordering::Relaxed) {
+                    let _ = tx.send(Err(e));
+                }
             }
         });
-        let tracked = tracker.track(rx.iter(), total, on_frame);
+        let tracked = tracker.track(rx.iter(), total, |f, p| {
+            if first == 0 {
+                return on_frame(f, p);
+            }
+            let mut f = f.clone();
+            f.index += first;
+            on_frame(&f, p)
+        });
         drop(rx);
         match producer.join() {
             Ok(()) => tracked,
@@ -196,10 +241,14 @@ pub fn track_clip(
             ))),
         }
     });
-    let track = result.map_err(|e| match e {
+    let mut track = result.map_err(|e| match e {
         TrackError::Input(e) => e,
         e => anyhow::Error::from(e),
     })?;
+    for f in &mut track.frames {
+        f.index += first;
+    }
+    track.init_frame += first;
     Ok(ClipTrack {
         info,
         camera,

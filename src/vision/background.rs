@@ -39,6 +39,21 @@ pub enum EmptyFrames {
     Range(usize, usize),
 }
 
+impl EmptyFrames {
+    /// Parses `auto`, `none` or a half-open range `A..B` (the command line's and the
+    /// service's spelling).
+    pub fn parse(text: &str) -> Result<EmptyFrames, String> {
+        Ok(match text {
+            "auto" => EmptyFrames::Auto,
+            "none" => EmptyFrames::None,
+            range => {
+                let (a, b) = crate::clip::parse_frame_range(range)?;
+                EmptyFrames::Range(a, b)
+            }
+        })
+    }
+}
+
 /// Fewest still leading frames taken as person-free.
 pub const MIN_EMPTY_FRAMES: usize = 3;
 
@@ -227,7 +242,7 @@ impl BackgroundBuilder {
                 r.push(px.0);
             }
         }
-        if index % self.stride == 0 {
+        if index.is_multiple_of(self.stride) {
             if self.kept == SAMPLES {
                 // Keep every other sample, double the stride.
                 for px in self.samples.chunks_mut(SAMPLES) {
@@ -238,7 +253,7 @@ impl BackgroundBuilder {
                 self.kept = SAMPLES / 2;
                 self.stride *= 2;
             }
-            if index % self.stride == 0 {
+            if index.is_multiple_of(self.stride) {
                 for (px, p) in self.samples.chunks_mut(SAMPLES).zip(frame.pixels()) {
                     px[self.kept] = p.0;
                 }

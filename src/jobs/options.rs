@@ -1,0 +1,153 @@
+//! A job's options: what `monocap track` takes as flags, as JSON (the `options`
+//! part of an upload, or query parameters).
+
+use serde::{Deserialize, Serialize};
+
+use crate::track::keyframes::Keyframes;
+use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
+use crate::vision::background::EmptyFrames;
+
+/// Every field is optional; an unknown field is an error, not silently ignored.
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct JobOptions {
+    /// Horizontal field of view of the camera, degrees (default 55).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fov_deg: Option<f64>,
+    /// Runs of the hierarchical simplex per frame, 1 to 20 (default 3).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub restarts: Option<usize>,
+    /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub keyframes: Option<serde_json::Value>,
+    /// Weights of the objective's terms (paper defaults 20, 20, 20 and 1).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_edge: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_extremity: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_region: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_core: Option<f64>,
+    /// Frame to initialise on (default: chosen automatically).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub init_frame: Option<usize>,
+    /// Frames to track, `A..B` (half-open; default: all).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub frames: Option<String>,
+    /// Person-free frames: `auto`, `none` or `A..B`.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub empty_frames: Option<String>,
+    /// The clip is a sequence of masks.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub masks: Option<bool>,
+    /// Most rows the tracker works at (default 288).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub work_height: Option<u32>,
+}
+
+impl JobOptions {
+    /// Options from JSON, with a message naming what is wrong.
+    pub fn from_json(v: serde_json::Value) -> Result<JobOptions, String> {
+        if !v.is_object() {
+            return Err("options must be a JSON object".into());
+        }
+        let opts: JobOptions = serde_json::from_value(v).map_err(|e| format!("options: {e}"))?;
+        opts.to_track()?;
+        Ok(opts)
+    }
+
+    /// Options from query parameters: numbers and booleans as written, `keyframes`
+    /// as JSON text.
+    pub fn from_query(pairs: &[(String, String)]) -> Result<JobOptions, String> {
+        let mut map = serde_json::Map::new();
+        for (k, v) in pairs {
+            if map.contains_key(k) {
+                return Err(format!("option {k} is given twice"));
+            }
+            let value = match k.as_str() {
+                "frames" | "empty_frames" => serde_json::Value::String(v.clone()),
+                "keyframes" => serde_json::from_str(v)
+                    .map_err(|e| format!("option keyframes is not JSON: {e}"))?,
+                _ => {
+                    serde_json::from_str(v).unwrap_or_else(|_| serde_json::Value::String(v.clone()))
+                }
+            };
+            map.insert(k.clone(), value);
+        }
+        JobOptions::from_json(serde_json::Value::Object(map))
+    }
+
+    /// Replaces the fields `other` sets (a rerun's new options over the old).
+    pub fn merged(&self, other: &JobOptions) -> JobOptions {
+        let mut a = serde_json::to_value(self).unwrap_or_default();
+        if let (Some(a), serde_json::Value::Object(b)) = (
+            a.as_object_mut(),
+            serde_json::to_value(other).unwrap_or_default(),
+        ) {
+            a.extend(b);
+        }
+        serde_json::from_value(a).unwrap_or_default()
+    }
+
+    /// The engine's options, checked.
+    pub fn to_track(&self) -> Result<ClipTrackOptions, String> {
+        let mut o = ClipTrackOptions::default();
+        if let Some(f) = self.fov_deg {
+            if !(f.is_finite() && f > 1.0 && f < 179.0) {
+                return Err(format!("fov_deg {f}: expected degrees between 1 and 179"));
+            }
+            o.fov_deg = f;
+        }
+        if let Some(r) = self.restarts {
+            if !(1..=20).contains(&r) {
+                return Err(format!("restarts {r}: expected 1 to 20"));
+            }
+            o.track.restarts = r;
+        }
+        let w = &mut o.track.weights;
+        for (name, v, slot) in [
+            ("w_edge", self.w_edge, &mut w.edge),
+            ("w_extremity", self.w_extremity, &mut w.extremity),
+            ("w_region", self.w_region, &mut w.region),
+            ("w_core", self.w_core, &mut o.track.features.core_weight),
+        ] {
+            if let Some(v) = v {
+                if !(v.is_finite() && v >= 0.0) {
+                    return Err(format!("{name} {v}: expected a number ≥ 0"));
+                }
+                *slot = v;
+            }
+        }
+        o.track.init_frame = self.init_frame;
+        if let Some(text) = &self.frames {
+            o.frames =
+                Some(crate::clip::parse_frame_range(text).map_err(|e| format!("frames {e}"))?);
+        }
+        if let Some(e) = &self.empty_frames {
+            o.silhouettes.background.empty =
+                EmptyFrames::parse(e).map_err(|e| format!("empty_frames {e}"))?;
+        }
+        o.masks = self.masks.unwrap_or(false);
+        if let Some(h) = self.work_height {
+            if !(32..=MAX_WORK_HEIGHT).contains(&h) {
+                return Err(format!(
+                    "work_height {h}: expected 32 to {MAX_WORK_HEIGHT} rows"
+                ));
+            }
+            o.work_height = h;
+        }
+        if let Some(k) = &self.keyframes {
+            let text = k.to_string();
+            if text.len() > crate::track::keyframes::MAX_BYTES {
+                return Err(format!(
+                    "keyframes: {} bytes, more than the limit of {}",
+                    text.len(),
+                    crate::track::keyframes::MAX_BYTES
+                ));
+            }
+            o.track.keyframes = Keyframes::parse(&text).map_err(|e| format!("keyframes: {e}"))?;
+        }
+        Ok(o)
+    }
+}

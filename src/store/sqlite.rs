@@ -1,0 +1,523 @@
+//! [`Store`] on SQLite (the embedded default): one file, write-ahead log, the
+//! migrations of `migrations/sqlite` applied at open.
+
+use std::path::Path;
+use std::str::FromStr;
+use std::time::Duration;
+
+use futures_util::future::BoxFuture;
+use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
+use sqlx::{Row, SqlitePool};
+
+use super::{
+    now_ms, ApiKey, Artifact, Event, Inserted, Job, JobError, JobFilter, JobState, NewJob, Outcome,
+    ProgressRow, Recovered, Store, StoreResult,
+};
+
+pub struct SqliteStore {
+    pool: SqlitePool,
+}
+
+impl SqliteStore {
+    /// Opens (creating if needed) the database file and brings its schema up to date.
+    pub async fn open(path: &Path) -> anyhow::Result<SqliteStore> {
+        let url = format!("sqlite://{}", path.display());
+        let opts = SqliteConnectOptions::from_str(&url)?
+            .create_if_missing(true)
+            .journal_mode(SqliteJournalMode::Wal)
+            .synchronous(SqliteSynchronous::Normal)
+            .busy_timeout(Duration::from_secs(10))
+            .foreign_keys(true);
+        let pool = SqlitePoolOptions::new()
+            .max_connections(8)
+            .connect_with(opts)
+            .await
+            .map_err(|e| anyhow::anyhow!("cannot open the database {}: {e}", path.display()))?;
+        sqlx::migrate!("migrations/sqlite")
+            .run(&pool)
+            .await
+            .map_err(|e| anyhow::anyhow!("cannot migrate the database {}: {e}", path.display()))?;
+        Ok(SqliteStore { pool })
+    }
+}
+
+const JOB_COLUMNS: &str = "id, owner, state, options, clip_key, clip_name, clip_bytes, clip_info, \
+    idempotency_key, rerun_of, attempts, cancel_requested, frames_done, frames_total, fps, \
+    error_code, error_message, artifacts, created_at, started_at, finished_at, updated_at, version";
+
+/// A query whose text splices in [`JOB_COLUMNS`] (a constant; values are bound).
+fn with_columns(
+    sql: String,
+) -> sqlx::query::Query<'static, sqlx::Sqlite, sqlx::sqlite::SqliteArguments> {
+    sqlx::query(sqlx::AssertSqlSafe(sql))
+}
+
+fn decode_err(what: &str, e: impl std::fmt::Display) -> sqlx::Error {
+    sqlx::Error::Decode(format!("{what}: {e}").into())
+}
+
+fn job_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Job> {
+    let state: String = row.try_get("state")?;
+    let options: String = row.try_get("options")?;
+    let clip_info: String = row.try_get("clip_info")?;
+    let artifacts: String = row.try_get("artifacts")?;
+    let error_code: Option<String> = row.try_get("error_code")?;
+    let error_message: Option<String> = row.try_get("error_message")?;
+    Ok(Job {
+        id: row.try_get("id")?,
+        owner: row.try_get("owner")?,
+        state: JobState::parse(&state).ok_or_else(|| decode_err("job state", &state))?,
+        options: serde_json::from_str(&options).map_err(|e| decode_err("job options", e))?,
+        clip_key: row.try_get("clip_key")?,
+        clip_name: row.try_get("clip_name")?,
+        clip_bytes: row.try_get::<i64, _>("clip_bytes")? as u64,
+        clip_info: serde_json::from_str(&clip_info).map_err(|e| decode_err("clip info", e))?,
+        idempotency_key: row.try_get("idempotency_key")?,
+        rerun_of: row.try_get("rerun_of")?,
+        attempts: row.try_get::<i64, _>("attempts")? as u32,
+        cancel_requested: row.try_get::<i64, _>("cancel_requested")? != 0,
+        frames_done: row.try_get::<i64, _>("frames_done")? as u64,
+        frames_total: row
+            .try_get::<Option<i64>, _>("frames_total")?
+            .map(|v| v as u64),
+        fps: row.try_get("fps")?,
+        error: error_code.map(|code| JobError {
+            code,
+            message: error_message.unwrap_or_default(),
+        }),
+        artifacts: serde_json::from_str::<Vec<Artifact>>(&artifacts)
+            .map_err(|e| decode_err("artifacts", e))?,
+        created_at: row.try_get("created_at")?,
+        started_at: row.try_get("started_at")?,
+        finished_at: row.try_get("finished_at")?,
+        updated_at: row.try_get("updated_at")?,
+        version: row.try_get("version")?,
+    })
+}
+
+fn event_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Event> {
+    let data: String = row.try_get("data")?;
+    Ok(Event {
+        seq: row.try_get("seq")?,
+        kind: row.try_get("kind")?,
+        data: serde_json::from_str(&data).map_err(|e| decode_err("event data", e))?,
+    })
+}
+
+impl SqliteStore {
+    async fn job_by_id(&self, id: &str) -> StoreResult<Option<Job>> {
+        let row = with_columns(format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = ?1"))
+            .bind(id)
+            .fetch_optional(&self.pool)
+            .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+
+    async fn job_by_idempotency(&self, owner: &str, key: &str) -> StoreResult<Option<Job>> {
+        let row = with_columns(format!(
+            "SELECT {JOB_COLUMNS} FROM jobs WHERE owner = ?1 AND idempotency_key = ?2"
+        ))
+        .bind(owner)
+        .bind(key)
+        .fetch_optional(&self.pool)
+        .await?;
+        row.as_ref().map(job_from_row).transpose()
+    }
+
+    async fn insert_events(
+        tx: &mut sqlx::SqliteConnection,
+        id: &str,
+        events: &[Event],
+    ) -> StoreResult<()> {
+        for e in events {
+            sqlx::query(
+                "INSERT OR IGNORE INTO job_events (job_id, seq, kind, data) VALUES (?1, ?2, ?3, ?4)",
+            )
+            .bind(id)
+            .bind(e.seq)
+            .bind(&e.kind)
+            .bind(e.data.to_string())
+            .execute(&mut *tx)
+            .await?;
+        }
+        Ok(())
+    }
+}
+
+impl Store for SqliteStore {
+    fn insert_job(&self, job: NewJob) -> BoxFuture<'_, StoreResult<Inserted>> {
+        Box::pin(async move {
+            if let Some(key) = &job.idempotency_key {
+                if let Some(existing) = self.job_by_idempotency(&job.owner, key).await? {
+                    return Ok(Inserted::Existing(existing));
+                }
+            }
+            let now = now_ms();
+            let res = sqlx::query(
+                "INSERT INTO jobs (id, owner, state, options, clip_key, clip_name, clip_bytes, \
+                 clip_info, idempotency_key, rerun_of, created_at, updated_at) \
+                 VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+            )
+            .bind(&job.id)
+            .bind(&job.owner)
+            .bind(job.options.to_string())
+            .bind(&job.clip_key)
+            .bind(&job.clip_name)
+            .bind(job.clip_bytes as i64)
+            .bind(job.clip_info.to_string())
+            .bind(&job.idempotency_key)
+            .bind(&job.rerun_of)
+            .bind(now)
+            .execute(&self.pool)
+            .await;
+            match res {
+                Ok(_) => {}
+                // Two uploads with the same key at once: the other one won.
+                Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
+                    if let Some(key) = &job.idempotency_key {
+                        if let Some(existing) = self.job_by_idempotency(&job.owner, key).await? {
+                            return Ok(Inserted::Existing(existing));
+                        }
+                    }
+                    return Err(sqlx::Error::Database(e));
+                }
+                Err(e) => return Err(e),
+            }
+            let inserted = self
+                .job_by_id(&job.id)
+                .await?
+                .ok_or(sqlx::Error::RowNotFound)?;
+            Ok(Inserted::New(inserted))
+        })
+    }
+
+    fn job(&self, id: &str) -> BoxFuture<'_, StoreResult<Option<Job>>> {
+        let id = id.to_string();
+        Box::pin(async move { self.job_by_id(&id).await })
+    }
+
+    fn list_jobs(&self, f: JobFilter) -> BoxFuture<'_, StoreResult<Vec<Job>>> {
+        Box::pin(async move {
+            let rows = with_columns(format!(
+                "SELECT {JOB_COLUMNS} FROM jobs \
+                 WHERE (?1 IS NULL OR owner = ?1) AND (?2 IS NULL OR state = ?2) \
+                 AND (?3 IS NULL OR id < ?3) AND (?5 IS NULL OR idempotency_key = ?5) \
+                 ORDER BY id DESC LIMIT ?4"
+            ))
+            .bind(&f.owner)
+            .bind(f.state.map(JobState::as_str))
+            .bind(&f.before)
+            .bind(f.limit as i64)
+            .bind(&f.idempotency_key)
+            .fetch_all(&self.pool)
+            .await?;
+            rows.iter().map(job_from_row).collect()
+        })
+    }
+
+    fn queue_position(&self, id: &str) -> BoxFuture<'_, StoreResult<Option<u64>>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            let row = sqlx::query(
+                "SELECT CASE WHEN j.state = 'queued' THEN \
+                 (SELECT COUNT(*) FROM jobs q WHERE q.state = 'queued' AND q.id < j.id) END AS pos \
+                 FROM jobs j WHERE j.id = ?1",
+            )
+            .bind(&id)
+            .fetch_optional(&self.pool)
+            .await?;
+            Ok(match row {
+                Some(r) => r.try_get::<Option<i64>, _>("pos")?.map(|v| v as u64),
+                None => None,
+            })
+        })
+    }
+
+    fn count_by_state(&self) -> BoxFuture<'_, StoreResult<Vec<(JobState, u64)>>> {
+        Box::pin(async move {
+            let rows = sqlx::query("SELECT state, COUNT(*) AS n FROM jobs GROUP BY state")
+                .fetch_all(&self.pool)
+                .await?;
+            let mut out: Vec<(JobState, u64)> = JobState::ALL.iter().map(|&s| (s, 0)).collect();
+            for r in rows {
+                let s: String = r.try_get("state")?;
+                let n: i64 = r.try_get("n")?;
+                if let Some(slot) = out.iter_mut().find(|(st, _)| st.as_str() == s) {
+                    slot.1 = n as u64;
+                }
+            }
+            Ok(out)
+        })
+    }
+
+    fn claim_next(&self) -> BoxFuture<'_, StoreResult<Option<Job>>> {
+        Box::pin(async move {
+            let now = now_ms();
+            let row = with_columns(format!(
+                "UPDATE jobs SET state = 'running', attempts = attempts + 1, started_at = ?1, \
+                 updated_at = ?1, version = version + 1, frames_done = 0 \
+                 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) \
+                 RETURNING {JOB_COLUMNS}"
+            ))
+            .bind(now)
+            .fetch_optional(&self.pool)
+            .await?;
+            row.as_ref().map(job_from_row).transpose()
+        })
+    }
+
+    fn set_progress(&self, id: &str, p: ProgressRow) -> BoxFuture<'_, StoreResult<()>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            sqlx::query(
+                "UPDATE jobs SET frames_done = ?2, frames_total = ?3, fps = ?4, \
+                 updated_at = ?5, version = version + 1 WHERE id = ?1 AND state = 'running'",
+            )
+            .bind(&id)
+            .bind(p.frames_done as i64)
+            .bind(p.frames_total.map(|v| v as i64))
+            .bind(p.fps)
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn append_events(&self, id: &str, events: Vec<Event>) -> BoxFuture<'_, StoreResult<()>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            let mut tx = self.pool.begin().await?;
+            Self::insert_events(&mut tx, &id, &events).await?;
+            tx.commit().await
+        })
+    }
+
+    fn events_after(
+        &self,
+        id: &str,
+        after: i64,
+        limit: u32,
+    ) -> BoxFuture<'_, StoreResult<Vec<Event>>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            let rows = sqlx::query(
+                "SELECT seq, kind, data FROM job_events WHERE job_id = ?1 AND seq > ?2 \
+                 ORDER BY seq LIMIT ?3",
+            )
+            .bind(&id)
+            .bind(after)
+            .bind(limit as i64)
+            .fetch_all(&self.pool)
+            .await?;
+            rows.iter().map(event_from_row).collect()
+        })
+    }
+
+    fn last_event_seq(&self, id: &str) -> BoxFuture<'_, StoreResult<i64>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            let row = sqlx::query("SELECT MAX(seq) AS s FROM job_events WHERE job_id = ?1")
+                .bind(&id)
+                .fetch_one(&self.pool)
+                .await?;
+            Ok(row.try_get::<Option<i64>, _>("s")?.unwrap_or(0))
+        })
+    }
+
+    fn finish(
+        &self,
+        id: &str,
+        from: &[JobState],
+        outcome: Outcome,
+        events: Vec<Event>,
+    ) -> BoxFuture<'_, StoreResult<bool>> {
+        let id = id.to_string();
+        let from: Vec<&'static str> = from.iter().map(|s| s.as_str()).collect();
+        Box::pin(async move {
+            let artifacts = serde_json::to_string(&outcome.artifacts)
+                .map_err(|e| decode_err("artifacts", e))?;
+            let mut tx = self.pool.begin().await?;
+            let now = now_ms();
+            let done = sqlx::query(
+                "UPDATE jobs SET state = ?2, error_code = ?3, error_message = ?4, artifacts = ?5, \
+                 finished_at = ?6, updated_at = ?6, version = version + 1 \
+                 WHERE id = ?1 AND state IN (SELECT value FROM json_each(?7))",
+            )
+            .bind(&id)
+            .bind(outcome.state.as_str())
+            .bind(outcome.error.as_ref().map(|e| e.code.clone()))
+            .bind(outcome.error.as_ref().map(|e| e.message.clone()))
+            .bind(artifacts)
+            .bind(now)
+            .bind(serde_json::to_string(&from).unwrap_or_default())
+            .execute(&mut *tx)
+            .await?
+            .rows_affected()
+                == 1;
+            if done {
+                Self::insert_events(&mut tx, &id, &events).await?;
+            }
+            tx.commit().await?;
+            Ok(done)
+        })
+    }
+
+    fn requeue(&self, id: &str) -> BoxFuture<'_, StoreResult<()>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            sqlx::query(
+                "UPDATE jobs SET state = 'queued', attempts = MAX(attempts - 1, 0), \
+                 frames_done = 0, started_at = NULL, updated_at = ?2, version = version + 1 \
+                 WHERE id = ?1 AND state = 'running'",
+            )
+            .bind(&id)
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn request_cancel(&self, id: &str) -> BoxFuture<'_, StoreResult<()>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            sqlx::query(
+                "UPDATE jobs SET cancel_requested = 1, updated_at = ?2, version = version + 1 \
+                 WHERE id = ?1 AND cancel_requested = 0",
+            )
+            .bind(&id)
+            .bind(now_ms())
+            .execute(&self.pool)
+            .await?;
+            Ok(())
+        })
+    }
+
+    fn delete_job(&self, id: &str) -> BoxFuture<'_, StoreResult<Option<Job>>> {
+        let id = id.to_string();
+        Box::pin(async move {
+            let mut tx = self.pool.begin().await?;
+            let row = with_columns(format!(
+                "DELETE FROM jobs WHERE id = ?1 RETURNING {JOB_COLUMNS}"
+            ))
+            .bind(&id)
+            .fetch_optional(&mut *tx)
+            .await?;
+            sqlx::query("DELETE FROM job_events WHERE job_id = ?1")
+                .bind(&id)
+                .execute(&mut *tx)
+                .await?;
+            tx.commit().await?;
+            row.as_ref().map(job_from_row).transpose()
+        })
+    }
+
+    fn clip_users(&self, clip_key: &str) -> BoxFuture<'_, StoreResult<u64>> {
+        let key = clip_key.to_string();
+        Box::pin(async move {
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE clip_key = ?1")
+                .bind(&key)
+                .fetch_one(&self.pool)
+                .await?;
+            Ok(row.try_get::<i64, _>("n")? as u64)
+        })
+    }
+
+    fn recover(&self, max_attempts: u32) -> BoxFuture<'_, StoreResult<Vec<Recovered>>> {
+        Box::pin(async move {
+            let now = now_ms();
+            let mut tx = self.pool.begin().await?;
+            let rows = sqlx::query(
+                "UPDATE jobs SET \
+                 state = CASE WHEN attempts >= ?1 OR cancel_requested = 1 THEN \
+                   (CASE WHEN cancel_requested = 1 THEN 'canceled' ELSE 'failed' END) \
+                   ELSE 'queued' END, \
+                 error_code = CASE WHEN attempts >= ?1 AND cancel_requested = 0 THEN 'gave_up' END, \
+                 error_message = CASE WHEN attempts >= ?1 AND cancel_requested = 0 THEN \
+                   'the service stopped while tracking this clip ' || attempts || \
+                   ' times; not trying again' END, \
+                 finished_at = CASE WHEN attempts >= ?1 OR cancel_requested = 1 THEN ?2 END, \
+                 frames_done = 0, updated_at = ?2, version = version + 1 \
+                 WHERE state = 'running' RETURNING id, state, attempts",
+            )
+            .bind(max_attempts as i64)
+            .bind(now)
+            .fetch_all(&mut *tx)
+            .await?;
+            tx.commit().await?;
+            rows.iter()
+                .map(|r| {
+                    let state: String = r.try_get("state")?;
+                    Ok(Recovered {
+                        id: r.try_get("id")?,
+                        state: JobState::parse(&state)
+                            .ok_or_else(|| decode_err("job state", &state))?,
+                        attempts: r.try_get::<i64, _>("attempts")? as u32,
+                    })
+                })
+                .collect()
+        })
+    }
+
+    fn create_key(
+        &self,
+        id: &str,
+        name: &str,
+        token_hash: &str,
+    ) -> BoxFuture<'_, StoreResult<ApiKey>> {
+        let (id, name, hash) = (id.to_string(), name.to_string(), token_hash.to_string());
+        Box::pin(async move {
+            let now = now_ms();
+            sqlx::query(
+                "INSERT INTO api_keys (id, name, token_hash, created_at) VALUES (?1, ?2, ?3, ?4)",
+            )
+            .bind(&id)
+            .bind(&name)
+            .bind(&hash)
+            .bind(now)
+            .execute(&self.pool)
+            .await?;
+            Ok(ApiKey {
+                id,
+                name,
+                created_at: now,
+            })
+        })
+    }
+
+    fn key_by_hash(&self, token_hash: &str) -> BoxFuture<'_, StoreResult<Option<ApiKey>>> {
+        let hash = token_hash.to_string();
+        Box::pin(async move {
+            let row =
+                sqlx::query("SELECT id, name, created_at FROM api_keys WHERE token_hash = ?1")
+                    .bind(&hash)
+                    .fetch_optional(&self.pool)
+                    .await?;
+            row.map(|r| {
+                Ok(ApiKey {
+                    id: r.try_get("id")?,
+                    name: r.try_get("name")?,
+                    created_at: r.try_get("created_at")?,
+                })
+            })
+            .transpose()
+        })
+    }
+
+    fn count_keys(&self) -> BoxFuture<'_, StoreResult<u64>> {
+        Box::pin(async move {
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM api_keys")
+                .fetch_one(&self.pool)
+                .await?;
+            Ok(row.try_get::<i64, _>("n")? as u64)
+        })
+    }
+
+    fn ping(&self) -> BoxFuture<'_, StoreResult<()>> {
+        Box::pin(async move {
+            sqlx::query("SELECT 1").execute(&self.pool).await?;
+            Ok(())
+        })
+    }
+}
