@@ -8,7 +8,7 @@
 
 use std::collections::HashMap;
 use std::path::PathBuf;
-use std::sync::atomic::{AtomicU8, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU8, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -37,7 +37,34 @@ pub struct PoolConfig {
     pub work_dir: PathBuf,
 }
 
-/// Why a running job should stop.
+/// Why a running job should stop, and a flag the engine polls (per frame while
+/// decoding, per tracked frame while tracking).
+struct Stop {
+    why: AtomicU8,
+    flag: Arc<AtomicBool>,
+}
+
+impl Stop {
+    fn new(why: u8) -> Stop {
+        Stop {
+            why: AtomicU8::new(why),
+            flag: Arc::new(AtomicBool::new(why != GO)),
+        }
+    }
+
+    /// Asks the job to stop for `why` (the first reason wins).
+    fn halt(&self, why: u8) {
+        let _ = self
+            .why
+            .compare_exchange(GO, why, Ordering::SeqCst, Ordering::SeqCst);
+        self.flag.store(true, Ordering::SeqCst);
+    }
+
+    fn why(&self) -> u8 {
+        self.why.load(Ordering::SeqCst)
+    }
+}
+
 const GO: u8 = 0;
 const CANCEL: u8 = 1;
 const SHUTDOWN: u8 = 2;
@@ -56,7 +83,7 @@ pub struct Jobs {
     pub blobs: Blobs,
     pub bus: Bus,
     pub cfg: PoolConfig,
-    running: Mutex<HashMap<String, Arc<AtomicU8>>>,
+    running: Mutex<HashMap<String, Arc<Stop>>>,
     wake: Notify,
     pub shutdown: CancellationToken,
 }
@@ -170,7 +197,7 @@ impl Jobs {
             .ok()
             .and_then(|m| m.get(&job.id).cloned())
         {
-            let _ = flag.compare_exchange(GO, CANCEL, Ordering::SeqCst, Ordering::SeqCst);
+            flag.halt(CANCEL);
         }
         Ok(true)
     }
@@ -212,8 +239,8 @@ impl Jobs {
             }
         }
         if let Ok(m) = self.running.lock() {
-            for flag in m.values() {
-                let _ = flag.compare_exchange(GO, SHUTDOWN, Ordering::SeqCst, Ordering::SeqCst);
+            for stop in m.values() {
+                stop.halt(SHUTDOWN);
             }
         }
         let _ = slots.acquire_many(workers as u32).await;
@@ -222,13 +249,7 @@ impl Jobs {
     async fn run_job(self: Arc<Self>, job: Job) -> anyhow::Result<()> {
         let id = job.id.clone();
         let span = tracing::info_span!("job", id = %id, attempt = job.attempts);
-        let _enter = span.enter();
-        drop(_enter);
-        let stop = Arc::new(AtomicU8::new(if job.cancel_requested {
-            CANCEL
-        } else {
-            GO
-        }));
+        let stop = Arc::new(Stop::new(if job.cancel_requested { CANCEL } else { GO }));
         if let Ok(mut m) = self.running.lock() {
             m.insert(id.clone(), stop.clone());
         }
@@ -238,7 +259,7 @@ impl Jobs {
         if let Ok(mut m) = self.running.lock() {
             m.remove(&id);
         }
-        let why = stop.load(Ordering::SeqCst);
+        let why = stop.why();
         let outcome = match result {
             Ok(artifacts) => Outcome {
                 state: JobState::Succeeded,
@@ -293,11 +314,7 @@ impl Jobs {
     }
 
     /// Tracks the job's clip and stores its files.
-    async fn track(
-        self: Arc<Self>,
-        job: &Job,
-        stop: Arc<AtomicU8>,
-    ) -> Result<Vec<Artifact>, Failure> {
+    async fn track(self: Arc<Self>, job: &Job, stop: Arc<Stop>) -> Result<Vec<Artifact>, Failure> {
         let id = job.id.clone();
         let live = self.live(&id).await.map_err(Failure::internal)?;
         self.record(
@@ -315,6 +332,7 @@ impl Jobs {
             .to_track()
             .map_err(|e| Failure::new("bad_options", e))?;
         opts.limits = self.cfg.limits.clone();
+        opts.silhouettes.stop = Some(stop.flag.clone());
         let clip = self
             .blobs
             .local_path(&job.clip_key)
@@ -356,10 +374,9 @@ impl Jobs {
                         });
                     }
                     if deadline.is_some_and(|d| Instant::now() > d) {
-                        let _ =
-                            stop.compare_exchange(GO, TIMEOUT, Ordering::SeqCst, Ordering::SeqCst);
+                        stop.halt(TIMEOUT);
                     }
-                    if stop.load(Ordering::SeqCst) == GO {
+                    if stop.why() == GO {
                         std::ops::ControlFlow::Continue(())
                     } else {
                         std::ops::ControlFlow::Break(())
@@ -385,7 +402,13 @@ impl Jobs {
         let joined = loop {
             tokio::select! {
                 r = &mut blocking => break r,
-                _ = tick.tick() => self.flush(&id, &live, &progress).await,
+                _ = tick.tick() => {
+                    // The limit also holds while the clip is decoded, before any frame.
+                    if deadline.is_some_and(|d| Instant::now() > d) {
+                        stop.halt(TIMEOUT);
+                    }
+                    self.flush(&id, &live, &progress).await
+                }
             }
         };
         self.flush(&id, &live, &progress).await;

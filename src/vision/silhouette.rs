@@ -20,6 +20,10 @@ pub struct SilhouetteOptions {
     /// outside its person, grown by this fraction of the image height (None: no
     /// second pass).
     pub refine_grow: Option<f64>,
+    /// When set (by another thread), [`clip_silhouettes`] stops at the next frame
+    /// with an error: how a service cancels a job during the decoding passes, which
+    /// call nothing per frame.
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Default for SilhouetteOptions {
@@ -28,6 +32,7 @@ impl Default for SilhouetteOptions {
             background: BackgroundOptions::default(),
             cleanup: CleanupOptions::default(),
             refine_grow: Some(0.03),
+            stop: None,
         }
     }
 }
@@ -120,7 +125,15 @@ pub fn clip_silhouettes(
         }
     }
     let (w, h) = (info.width, info.height);
-    let size_check = |f: &RgbImage| -> anyhow::Result<()> {
+    let stopped = || {
+        opts.stop
+            .as_ref()
+            .is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
+    };
+    let check_frame = |f: &RgbImage| -> anyhow::Result<()> {
+        if stopped() {
+            anyhow::bail!("stopped");
+        }
         if f.dimensions() != (w, h) {
             anyhow::bail!(
                 "{}: a frame of {}×{} in a clip of {w}×{h} (frame sizes must not change)",
@@ -135,7 +148,7 @@ pub fn clip_silhouettes(
     if masks || info.is_mask {
         let mut src = open_with(path, limits, true)?;
         while let Some(f) = src.next_frame()? {
-            size_check(&f)?;
+            check_frame(&f)?;
             each(frames, &f, &mask_from_frame(&f))?;
             frames += 1;
         }
@@ -148,7 +161,7 @@ pub fn clip_silhouettes(
     let seg = Segmenter::learn(w, h, opts, |visit| {
         let mut src = open(path, limits)?;
         while let Some(f) = src.next_frame()? {
-            size_check(&f)?;
+            check_frame(&f)?;
             visit(&f);
         }
         Ok::<_, anyhow::Error>(())
@@ -156,7 +169,7 @@ pub fn clip_silhouettes(
     let mut src = open(path, limits)?;
     let mut mask = Mask::new(w, h);
     while let Some(f) = src.next_frame()? {
-        size_check(&f)?;
+        check_frame(&f)?;
         seg.silhouette(&f, &mut mask);
         each(frames, &f, &mask)?;
         frames += 1;
