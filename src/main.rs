@@ -56,6 +56,10 @@ struct ServeArgs {
     #[arg(long)]
     #[serde(skip_serializing_if = "Option::is_none")]
     data_dir: Option<PathBuf>,
+    /// PostgreSQL instead of the data folder's SQLite file (postgres://USER@HOST/DB).
+    #[arg(long)]
+    #[serde(skip_serializing_if = "Option::is_none")]
+    database_url: Option<String>,
     /// Jobs tracking at once [default and most: the machine's cores].
     #[arg(long)]
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -104,6 +108,9 @@ enum KeysCommand {
         /// Folder of the database [default: ./monocap-data, or MONOCAP_DATA_DIR].
         #[arg(long, env = "MONOCAP_DATA_DIR", default_value = "monocap-data")]
         data_dir: PathBuf,
+        /// The service's PostgreSQL database, when it uses one.
+        #[arg(long, env = "MONOCAP_DATABASE_URL")]
+        database_url: Option<String>,
     },
 }
 
@@ -329,9 +336,15 @@ fn run(cli: Cli) -> Result<()> {
         Command::Track(a) => track_command(a),
         Command::Serve(a) => serve_command(a),
         Command::Keys {
-            command: KeysCommand::Create { name, data_dir },
+            command:
+                KeysCommand::Create {
+                    name,
+                    data_dir,
+                    database_url,
+                },
         } => runtime()?.block_on(async {
-            let (id, token) = monocap::api::server::create_key(&data_dir, &name).await?;
+            let (id, token) =
+                monocap::api::server::create_key(&data_dir, database_url.as_deref(), &name).await?;
             println!(
                 "created API key {name:?} (id {id}) in {}; its token, shown only now:",
                 data_dir.display()

@@ -98,6 +98,9 @@ pub async fn artifact(
         Ok(r) => r,
         Err(Unsatisfiable) => {
             h.insert("content-range", hv(&format!("bytes */{}", a.bytes))?);
+            // The body is the JSON error, not the file.
+            h.remove("content-type");
+            h.remove("content-disposition");
             let mut res = ApiError::new(
                 StatusCode::RANGE_NOT_SATISFIABLE,
                 "bad_range",

@@ -15,7 +15,7 @@ use serde_json::json;
 use super::{router, ApiConfig, AppState};
 use crate::jobs::worker::{Jobs, PoolConfig};
 use crate::store::blobs::Blobs;
-use crate::store::sqlite::SqliteStore;
+use crate::store::sql::SqlStore;
 use crate::store::{JobState, Store};
 
 /// The service's settings.
@@ -26,6 +26,9 @@ pub struct ServeConfig {
     pub listen: String,
     /// Database and files.
     pub data_dir: PathBuf,
+    /// A PostgreSQL database (`postgres://…`) instead of the data folder's SQLite
+    /// file; files stay in the data folder.
+    pub database_url: Option<String>,
     /// Jobs tracking at once (default and most: the machine's cores).
     pub workers: Option<usize>,
     /// Largest upload, MiB.
@@ -50,6 +53,7 @@ impl Default for ServeConfig {
         ServeConfig {
             listen: "127.0.0.1:8080".into(),
             data_dir: PathBuf::from("monocap-data"),
+            database_url: None,
             workers: None,
             max_upload_mb: 2048,
             max_queue: 1000,
@@ -78,6 +82,7 @@ impl ServeConfig {
             .merge(Env::prefixed("MONOCAP_").only(&[
                 "listen",
                 "data_dir",
+                "database_url",
                 "workers",
                 "max_upload_mb",
                 "max_queue",
@@ -92,20 +97,27 @@ impl ServeConfig {
     }
 }
 
-/// Opens the data folder's database.
-pub async fn open_store(data_dir: &Path) -> Result<SqliteStore> {
+/// Opens the database: `database_url`, or the data folder's SQLite file.
+pub async fn open_store(data_dir: &Path, database_url: Option<&str>) -> Result<SqlStore> {
     std::fs::create_dir_all(data_dir)
         .with_context(|| format!("cannot create the data folder {}", data_dir.display()))?;
-    SqliteStore::open(&data_dir.join("monocap.db")).await
+    match database_url {
+        Some(url) => SqlStore::connect(url).await,
+        None => SqlStore::open_sqlite(&data_dir.join("monocap.db")).await,
+    }
 }
 
 /// `monocap keys create`: a new API key; returns (id, token).
-pub async fn create_key(data_dir: &Path, name: &str) -> Result<(String, String)> {
+pub async fn create_key(
+    data_dir: &Path,
+    database_url: Option<&str>,
+    name: &str,
+) -> Result<(String, String)> {
     let name = name.trim();
     if name.is_empty() || name.len() > 100 || name.chars().any(char::is_control) {
         anyhow::bail!("--name {name:?}: expected 1 to 100 printable characters");
     }
-    let store = open_store(data_dir).await?;
+    let store = open_store(data_dir, database_url).await?;
     let secret: [u8; 32] = rand::random();
     let token = format!(
         "mck_{}",
@@ -127,7 +139,7 @@ pub async fn serve(cfg: ServeConfig) -> Result<()> {
         .listen
         .parse()
         .with_context(|| format!("--listen {:?}: expected ADDRESS:PORT", cfg.listen))?;
-    let store = open_store(&cfg.data_dir).await?;
+    let store = open_store(&cfg.data_dir, cfg.database_url.as_deref()).await?;
     let keys = store.count_keys().await?;
     if keys == 0 && !addr.ip().is_loopback() {
         anyhow::bail!(

@@ -1,9 +1,9 @@
 //! What the service keeps: jobs, their progress events and API keys in a database
-//! (behind [`Store`]; SQLite is the embedded default), clips and motion files in a
+//! (behind [`Store`]; SQLite is the embedded default, PostgreSQL the shared one), clips and motion files in a
 //! blob store ([`blobs::Blobs`]).
 
 pub mod blobs;
-pub mod sqlite;
+pub mod sql;
 
 use futures_util::future::BoxFuture;
 use serde::{Deserialize, Serialize};

@@ -1,43 +1,86 @@
-//! [`Store`] on SQLite (the embedded default): one file, write-ahead log, the
-//! migrations of `migrations/sqlite` applied at open.
+//! [`Store`] on SQL through sqlx's `Any` driver: the same queries serve SQLite (the
+//! embedded default: one file, write-ahead log) and PostgreSQL (several service nodes
+//! on one database). Each has its migrations (`migrations/sqlite`,
+//! `migrations/postgres`), applied at open. The SQL is the common dialect of both:
+//! `$N` parameters, `ON CONFLICT`, `RETURNING`.
 
 use std::path::Path;
-use std::str::FromStr;
 use std::time::Duration;
 
 use futures_util::future::BoxFuture;
-use sqlx::sqlite::{SqliteConnectOptions, SqliteJournalMode, SqlitePoolOptions, SqliteSynchronous};
-use sqlx::{Row, SqlitePool};
+use sqlx::any::{AnyPoolOptions, AnyRow};
+use sqlx::{AnyPool, Executor, Row};
 
 use super::{
     now_ms, ApiKey, Artifact, Event, Inserted, Job, JobError, JobFilter, JobState, NewJob, Outcome,
     ProgressRow, Recovered, Store, StoreResult,
 };
 
-pub struct SqliteStore {
-    pool: SqlitePool,
+/// Which database a [`SqlStore`] talks to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Backend {
+    Sqlite,
+    Postgres,
 }
 
-impl SqliteStore {
-    /// Opens (creating if needed) the database file and brings its schema up to date.
-    pub async fn open(path: &Path) -> anyhow::Result<SqliteStore> {
-        let url = format!("sqlite://{}", path.display());
-        let opts = SqliteConnectOptions::from_str(&url)?
-            .create_if_missing(true)
-            .journal_mode(SqliteJournalMode::Wal)
-            .synchronous(SqliteSynchronous::Normal)
-            .busy_timeout(Duration::from_secs(10))
-            .foreign_keys(true);
-        let pool = SqlitePoolOptions::new()
-            .max_connections(8)
-            .connect_with(opts)
+pub struct SqlStore {
+    pool: AnyPool,
+    pub backend: Backend,
+}
+
+impl SqlStore {
+    /// Opens (creating if needed) an SQLite database file.
+    pub async fn open_sqlite(path: &Path) -> anyhow::Result<SqlStore> {
+        SqlStore::connect(&format!("sqlite://{}?mode=rwc", path.display())).await
+    }
+
+    /// Connects to `sqlite://PATH` or `postgres://…` and brings the schema up to
+    /// date.
+    pub async fn connect(url: &str) -> anyhow::Result<SqlStore> {
+        sqlx::any::install_default_drivers();
+        let backend = if url.starts_with("postgres://") || url.starts_with("postgresql://") {
+            Backend::Postgres
+        } else if url.starts_with("sqlite:") {
+            Backend::Sqlite
+        } else {
+            anyhow::bail!("database URL {url:?}: expected sqlite://PATH or postgres://…");
+        };
+        let shown = redact(url);
+        let pool = AnyPoolOptions::new()
+            .max_connections(if backend == Backend::Sqlite { 8 } else { 16 })
+            .after_connect(move |conn, _| {
+                Box::pin(async move {
+                    if backend == Backend::Sqlite {
+                        // Readers never block the writer; wait for locks, do not fail.
+                        conn.execute("PRAGMA journal_mode = WAL").await?;
+                        conn.execute("PRAGMA synchronous = NORMAL").await?;
+                        conn.execute("PRAGMA busy_timeout = 10000").await?;
+                        conn.execute("PRAGMA foreign_keys = ON").await?;
+                    }
+                    Ok(())
+                })
+            })
+            .acquire_timeout(Duration::from_secs(30))
+            .connect(url)
             .await
-            .map_err(|e| anyhow::anyhow!("cannot open the database {}: {e}", path.display()))?;
-        sqlx::migrate!("migrations/sqlite")
-            .run(&pool)
-            .await
-            .map_err(|e| anyhow::anyhow!("cannot migrate the database {}: {e}", path.display()))?;
-        Ok(SqliteStore { pool })
+            .map_err(|e| anyhow::anyhow!("cannot open the database {shown}: {e}"))?;
+        let migrated = match backend {
+            Backend::Sqlite => sqlx::migrate!("migrations/sqlite").run(&pool).await,
+            Backend::Postgres => sqlx::migrate!("migrations/postgres").run(&pool).await,
+        };
+        migrated.map_err(|e| anyhow::anyhow!("cannot migrate the database {shown}: {e}"))?;
+        Ok(SqlStore { pool, backend })
+    }
+}
+
+/// A database URL without its password.
+fn redact(url: &str) -> String {
+    match (url.find("://"), url.rfind('@')) {
+        (Some(a), Some(b)) if b > a => match url[a + 3..b].split_once(':') {
+            Some((user, _)) => format!("{}{user}:***{}", &url[..a + 3], &url[b..]),
+            None => url.to_string(),
+        },
+        _ => url.to_string(),
     }
 }
 
@@ -46,9 +89,7 @@ const JOB_COLUMNS: &str = "id, owner, state, options, clip_key, clip_name, clip_
     error_code, error_message, artifacts, created_at, started_at, finished_at, updated_at, version";
 
 /// A query whose text splices in [`JOB_COLUMNS`] (a constant; values are bound).
-fn with_columns(
-    sql: String,
-) -> sqlx::query::Query<'static, sqlx::Sqlite, sqlx::sqlite::SqliteArguments> {
+fn with_columns(sql: String) -> sqlx::query::Query<'static, sqlx::Any, sqlx::any::AnyArguments> {
     sqlx::query(sqlx::AssertSqlSafe(sql))
 }
 
@@ -56,7 +97,7 @@ fn decode_err(what: &str, e: impl std::fmt::Display) -> sqlx::Error {
     sqlx::Error::Decode(format!("{what}: {e}").into())
 }
 
-fn job_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Job> {
+fn job_from_row(row: &AnyRow) -> StoreResult<Job> {
     let state: String = row.try_get("state")?;
     let options: String = row.try_get("options")?;
     let clip_info: String = row.try_get("clip_info")?;
@@ -95,7 +136,7 @@ fn job_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Job> {
     })
 }
 
-fn event_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Event> {
+fn event_from_row(row: &AnyRow) -> StoreResult<Event> {
     let data: String = row.try_get("data")?;
     Ok(Event {
         seq: row.try_get("seq")?,
@@ -104,9 +145,9 @@ fn event_from_row(row: &sqlx::sqlite::SqliteRow) -> StoreResult<Event> {
     })
 }
 
-impl SqliteStore {
+impl SqlStore {
     async fn job_by_id(&self, id: &str) -> StoreResult<Option<Job>> {
-        let row = with_columns(format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = ?1"))
+        let row = with_columns(format!("SELECT {JOB_COLUMNS} FROM jobs WHERE id = $1"))
             .bind(id)
             .fetch_optional(&self.pool)
             .await?;
@@ -115,7 +156,7 @@ impl SqliteStore {
 
     async fn job_by_idempotency(&self, owner: &str, key: &str) -> StoreResult<Option<Job>> {
         let row = with_columns(format!(
-            "SELECT {JOB_COLUMNS} FROM jobs WHERE owner = ?1 AND idempotency_key = ?2"
+            "SELECT {JOB_COLUMNS} FROM jobs WHERE owner = $1 AND idempotency_key = $2"
         ))
         .bind(owner)
         .bind(key)
@@ -125,13 +166,14 @@ impl SqliteStore {
     }
 
     async fn insert_events(
-        tx: &mut sqlx::SqliteConnection,
+        tx: &mut sqlx::AnyConnection,
         id: &str,
         events: &[Event],
     ) -> StoreResult<()> {
         for e in events {
             sqlx::query(
-                "INSERT OR IGNORE INTO job_events (job_id, seq, kind, data) VALUES (?1, ?2, ?3, ?4)",
+                "INSERT INTO job_events (job_id, seq, kind, data) VALUES ($1, $2, $3, $4) \
+                 ON CONFLICT DO NOTHING",
             )
             .bind(id)
             .bind(e.seq)
@@ -144,7 +186,7 @@ impl SqliteStore {
     }
 }
 
-impl Store for SqliteStore {
+impl Store for SqlStore {
     fn insert_job(&self, job: NewJob) -> BoxFuture<'_, StoreResult<Inserted>> {
         Box::pin(async move {
             if let Some(key) = &job.idempotency_key {
@@ -156,7 +198,7 @@ impl Store for SqliteStore {
             let res = sqlx::query(
                 "INSERT INTO jobs (id, owner, state, options, clip_key, clip_name, clip_bytes, \
                  clip_info, idempotency_key, rerun_of, created_at, updated_at) \
-                 VALUES (?1, ?2, 'queued', ?3, ?4, ?5, ?6, ?7, ?8, ?9, ?10, ?10)",
+                 VALUES ($1, $2, 'queued', $3, $4, $5, $6, $7, $8, $9, $10, $10)",
             )
             .bind(&job.id)
             .bind(&job.owner)
@@ -200,9 +242,9 @@ impl Store for SqliteStore {
         Box::pin(async move {
             let rows = with_columns(format!(
                 "SELECT {JOB_COLUMNS} FROM jobs \
-                 WHERE (?1 IS NULL OR owner = ?1) AND (?2 IS NULL OR state = ?2) \
-                 AND (?3 IS NULL OR id < ?3) AND (?5 IS NULL OR idempotency_key = ?5) \
-                 ORDER BY id DESC LIMIT ?4"
+                 WHERE ($1 IS NULL OR owner = $1) AND ($2 IS NULL OR state = $2) \
+                 AND ($3 IS NULL OR id < $3) AND ($5 IS NULL OR idempotency_key = $5) \
+                 ORDER BY id DESC LIMIT $4"
             ))
             .bind(&f.owner)
             .bind(f.state.map(JobState::as_str))
@@ -221,7 +263,7 @@ impl Store for SqliteStore {
             let row = sqlx::query(
                 "SELECT CASE WHEN j.state = 'queued' THEN \
                  (SELECT COUNT(*) FROM jobs q WHERE q.state = 'queued' AND q.id < j.id) END AS pos \
-                 FROM jobs j WHERE j.id = ?1",
+                 FROM jobs j WHERE j.id = $1",
             )
             .bind(&id)
             .fetch_optional(&self.pool)
@@ -254,9 +296,10 @@ impl Store for SqliteStore {
         Box::pin(async move {
             let now = now_ms();
             let row = with_columns(format!(
-                "UPDATE jobs SET state = 'running', attempts = attempts + 1, started_at = ?1, \
-                 updated_at = ?1, version = version + 1, frames_done = 0 \
-                 WHERE id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) \
+                "UPDATE jobs SET state = 'running', attempts = attempts + 1, started_at = $1, \
+                 updated_at = $1, version = version + 1, frames_done = 0 \
+                 WHERE state = 'queued' \
+                 AND id = (SELECT id FROM jobs WHERE state = 'queued' ORDER BY id LIMIT 1) \
                  RETURNING {JOB_COLUMNS}"
             ))
             .bind(now)
@@ -270,8 +313,8 @@ impl Store for SqliteStore {
         let id = id.to_string();
         Box::pin(async move {
             sqlx::query(
-                "UPDATE jobs SET frames_done = ?2, frames_total = ?3, fps = ?4, \
-                 updated_at = ?5, version = version + 1 WHERE id = ?1 AND state = 'running'",
+                "UPDATE jobs SET frames_done = $2, frames_total = $3, fps = $4, \
+                 updated_at = $5, version = version + 1 WHERE id = $1 AND state = 'running'",
             )
             .bind(&id)
             .bind(p.frames_done as i64)
@@ -302,8 +345,8 @@ impl Store for SqliteStore {
         let id = id.to_string();
         Box::pin(async move {
             let rows = sqlx::query(
-                "SELECT seq, kind, data FROM job_events WHERE job_id = ?1 AND seq > ?2 \
-                 ORDER BY seq LIMIT ?3",
+                "SELECT seq, kind, data FROM job_events WHERE job_id = $1 AND seq > $2 \
+                 ORDER BY seq LIMIT $3",
             )
             .bind(&id)
             .bind(after)
@@ -317,7 +360,7 @@ impl Store for SqliteStore {
     fn last_event_seq(&self, id: &str) -> BoxFuture<'_, StoreResult<i64>> {
         let id = id.to_string();
         Box::pin(async move {
-            let row = sqlx::query("SELECT MAX(seq) AS s FROM job_events WHERE job_id = ?1")
+            let row = sqlx::query("SELECT MAX(seq) AS s FROM job_events WHERE job_id = $1")
                 .bind(&id)
                 .fetch_one(&self.pool)
                 .await?;
@@ -333,16 +376,18 @@ impl Store for SqliteStore {
         events: Vec<Event>,
     ) -> BoxFuture<'_, StoreResult<bool>> {
         let id = id.to_string();
-        let from: Vec<&'static str> = from.iter().map(|s| s.as_str()).collect();
+        // One or two states (bound twice when one).
+        let from_a = from.first().map_or("", |s| s.as_str());
+        let from_b = from.get(1).map_or(from_a, |s| s.as_str());
         Box::pin(async move {
             let artifacts = serde_json::to_string(&outcome.artifacts)
                 .map_err(|e| decode_err("artifacts", e))?;
             let mut tx = self.pool.begin().await?;
             let now = now_ms();
             let done = sqlx::query(
-                "UPDATE jobs SET state = ?2, error_code = ?3, error_message = ?4, artifacts = ?5, \
-                 finished_at = ?6, updated_at = ?6, version = version + 1 \
-                 WHERE id = ?1 AND state IN (SELECT value FROM json_each(?7))",
+                "UPDATE jobs SET state = $2, error_code = $3, error_message = $4, artifacts = $5, \
+                 finished_at = $6, updated_at = $6, version = version + 1 \
+                 WHERE id = $1 AND state IN ($7, $8)",
             )
             .bind(&id)
             .bind(outcome.state.as_str())
@@ -350,7 +395,8 @@ impl Store for SqliteStore {
             .bind(outcome.error.as_ref().map(|e| e.message.clone()))
             .bind(artifacts)
             .bind(now)
-            .bind(serde_json::to_string(&from).unwrap_or_default())
+            .bind(from_a)
+            .bind(from_b)
             .execute(&mut *tx)
             .await?
             .rows_affected()
@@ -367,9 +413,9 @@ impl Store for SqliteStore {
         let id = id.to_string();
         Box::pin(async move {
             sqlx::query(
-                "UPDATE jobs SET state = 'queued', attempts = MAX(attempts - 1, 0), \
-                 frames_done = 0, started_at = NULL, updated_at = ?2, version = version + 1 \
-                 WHERE id = ?1 AND state = 'running'",
+                "UPDATE jobs SET state = 'queued', attempts = CASE WHEN attempts > 0 THEN attempts - 1 ELSE 0 END, \
+                 frames_done = 0, started_at = NULL, updated_at = $2, version = version + 1 \
+                 WHERE id = $1 AND state = 'running'",
             )
             .bind(&id)
             .bind(now_ms())
@@ -383,8 +429,8 @@ impl Store for SqliteStore {
         let id = id.to_string();
         Box::pin(async move {
             sqlx::query(
-                "UPDATE jobs SET cancel_requested = 1, updated_at = ?2, version = version + 1 \
-                 WHERE id = ?1 AND cancel_requested = 0",
+                "UPDATE jobs SET cancel_requested = 1, updated_at = $2, version = version + 1 \
+                 WHERE id = $1 AND cancel_requested = 0",
             )
             .bind(&id)
             .bind(now_ms())
@@ -399,12 +445,12 @@ impl Store for SqliteStore {
         Box::pin(async move {
             let mut tx = self.pool.begin().await?;
             let row = with_columns(format!(
-                "DELETE FROM jobs WHERE id = ?1 RETURNING {JOB_COLUMNS}"
+                "DELETE FROM jobs WHERE id = $1 RETURNING {JOB_COLUMNS}"
             ))
             .bind(&id)
             .fetch_optional(&mut *tx)
             .await?;
-            sqlx::query("DELETE FROM job_events WHERE job_id = ?1")
+            sqlx::query("DELETE FROM job_events WHERE job_id = $1")
                 .bind(&id)
                 .execute(&mut *tx)
                 .await?;
@@ -416,7 +462,7 @@ impl Store for SqliteStore {
     fn clip_users(&self, clip_key: &str) -> BoxFuture<'_, StoreResult<u64>> {
         let key = clip_key.to_string();
         Box::pin(async move {
-            let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE clip_key = ?1")
+            let row = sqlx::query("SELECT COUNT(*) AS n FROM jobs WHERE clip_key = $1")
                 .bind(&key)
                 .fetch_one(&self.pool)
                 .await?;
@@ -430,15 +476,15 @@ impl Store for SqliteStore {
             let mut tx = self.pool.begin().await?;
             let rows = sqlx::query(
                 "UPDATE jobs SET \
-                 state = CASE WHEN attempts >= ?1 OR cancel_requested = 1 THEN \
+                 state = CASE WHEN attempts >= $1 OR cancel_requested = 1 THEN \
                    (CASE WHEN cancel_requested = 1 THEN 'canceled' ELSE 'failed' END) \
                    ELSE 'queued' END, \
-                 error_code = CASE WHEN attempts >= ?1 AND cancel_requested = 0 THEN 'gave_up' END, \
-                 error_message = CASE WHEN attempts >= ?1 AND cancel_requested = 0 THEN \
+                 error_code = CASE WHEN attempts >= $1 AND cancel_requested = 0 THEN 'gave_up' END, \
+                 error_message = CASE WHEN attempts >= $1 AND cancel_requested = 0 THEN \
                    'the service stopped while tracking this clip ' || attempts || \
                    ' times; not trying again' END, \
-                 finished_at = CASE WHEN attempts >= ?1 OR cancel_requested = 1 THEN ?2 END, \
-                 frames_done = 0, updated_at = ?2, version = version + 1 \
+                 finished_at = CASE WHEN attempts >= $1 OR cancel_requested = 1 THEN $2 END, \
+                 frames_done = 0, updated_at = $2, version = version + 1 \
                  WHERE state = 'running' RETURNING id, state, attempts",
             )
             .bind(max_attempts as i64)
@@ -470,7 +516,7 @@ impl Store for SqliteStore {
         Box::pin(async move {
             let now = now_ms();
             sqlx::query(
-                "INSERT INTO api_keys (id, name, token_hash, created_at) VALUES (?1, ?2, ?3, ?4)",
+                "INSERT INTO api_keys (id, name, token_hash, created_at) VALUES ($1, $2, $3, $4)",
             )
             .bind(&id)
             .bind(&name)
@@ -490,7 +536,7 @@ impl Store for SqliteStore {
         let hash = token_hash.to_string();
         Box::pin(async move {
             let row =
-                sqlx::query("SELECT id, name, created_at FROM api_keys WHERE token_hash = ?1")
+                sqlx::query("SELECT id, name, created_at FROM api_keys WHERE token_hash = $1")
                     .bind(&hash)
                     .fetch_optional(&self.pool)
                     .await?;
