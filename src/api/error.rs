@@ -1,6 +1,8 @@
 //! Every 4xx/5xx answer: `{"error": {"code": "...", "message": "..."}}` with a stable
 //! code (the codes are listed in openapi.yaml).
 
+use axum::extract::{FromRequestParts, Path};
+use axum::http::request::Parts;
 use axum::http::{HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
@@ -70,6 +72,25 @@ impl IntoResponse for ApiError {
             }
         }
         res
+    }
+}
+
+/// A path parameter whose rejection (such as invalid UTF-8 in a percent-encoded
+/// segment) is the error body, like every other 4xx, not axum's plain text.
+pub struct ApiPath<T>(pub T);
+
+impl<T, S> FromRequestParts<S> for ApiPath<T>
+where
+    T: serde::de::DeserializeOwned + Send,
+    S: Send + Sync,
+{
+    type Rejection = ApiError;
+
+    async fn from_request_parts(parts: &mut Parts, state: &S) -> Result<Self, ApiError> {
+        match Path::<T>::from_request_parts(parts, state).await {
+            Ok(Path(v)) => Ok(ApiPath(v)),
+            Err(e) => Err(from_rejection(e.status(), e.body_text())),
+        }
     }
 }
 

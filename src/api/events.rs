@@ -7,13 +7,13 @@
 use std::convert::Infallible;
 use std::time::Duration;
 
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::HeaderMap;
 use axum::response::sse::{Event as SseEvent, KeepAlive, Sse};
 use futures_util::Stream;
 use tokio::sync::mpsc;
 
-use super::error::{ApiError, ApiResult};
+use super::error::{ApiError, ApiPath, ApiResult};
 use super::jobs::{owned, view};
 use super::{AppState, Caller};
 use crate::store::Event;
@@ -35,7 +35,7 @@ fn is_final(e: &Event) -> bool {
 pub async fn stream(
     State(s): State<AppState>,
     caller: Caller,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Sse<impl Stream<Item = Result<SseEvent, Infallible>>>> {
     let job = owned(&s, &caller, &id).await?;

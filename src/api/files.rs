@@ -3,12 +3,12 @@
 //! made), `If-None-Match` and single byte ranges (`Range: bytes=a-b`, `a-`, `-n`).
 
 use axum::body::Body;
-use axum::extract::{Path, State};
+use axum::extract::State;
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use futures_util::StreamExt;
 
-use super::error::{ApiError, ApiResult};
+use super::error::{ApiError, ApiPath, ApiResult};
 use super::jobs::owned;
 use super::{AppState, Caller};
 use crate::jobs::worker::artifact_key;
@@ -56,7 +56,7 @@ pub fn parse_range(header: Option<&str>, size: u64) -> Result<Option<(u64, u64)>
 pub async fn artifact(
     State(s): State<AppState>,
     caller: Caller,
-    Path((id, name)): Path<(String, String)>,
+    ApiPath((id, name)): ApiPath<(String, String)>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
     let job = owned(&s, &caller, &id).await?;

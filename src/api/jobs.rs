@@ -1,13 +1,13 @@
 //! Job routes: submit, list, show (with ETags), cancel, delete, rerun, and probing a
 //! clip without a job.
 
-use axum::extract::{Path, Query, Request, State};
+use axum::extract::{Query, Request, State};
 use axum::http::{HeaderMap, HeaderValue, StatusCode};
 use axum::response::{IntoResponse, Response};
 use axum::Json;
 use serde_json::{json, Value};
 
-use super::error::{ApiError, ApiResult};
+use super::error::{ApiError, ApiPath, ApiResult};
 use super::upload::{self, Upload};
 use super::{AppState, Caller};
 use crate::jobs::options::JobOptions;
@@ -382,7 +382,7 @@ pub async fn list(
 pub async fn show(
     State(s): State<AppState>,
     caller: Caller,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
     headers: HeaderMap,
 ) -> ApiResult<Response> {
     let job = owned(&s, &caller, &id).await?;
@@ -405,7 +405,7 @@ pub async fn show(
 pub async fn cancel(
     State(s): State<AppState>,
     caller: Caller,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
 ) -> ApiResult<Response> {
     let job = owned(&s, &caller, &id).await?;
     if !s.jobs.cancel(&job).await? {
@@ -424,7 +424,7 @@ pub async fn cancel(
 pub async fn delete(
     State(s): State<AppState>,
     caller: Caller,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
 ) -> ApiResult<StatusCode> {
     let mut job = owned(&s, &caller, &id).await?;
     if !job.state.is_final() {
@@ -458,7 +458,7 @@ pub async fn delete(
 pub async fn rerun(
     State(s): State<AppState>,
     caller: Caller,
-    Path(id): Path<String>,
+    ApiPath(id): ApiPath<String>,
     body: axum::body::Bytes,
 ) -> ApiResult<Response> {
     let old = owned(&s, &caller, &id).await?;

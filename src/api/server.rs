@@ -217,11 +217,19 @@ pub async fn serve(cfg: ServeConfig) -> Result<()> {
     Ok(())
 }
 
+/// More events than a job can stream between two writes to the database.
+const UNSTORED_EVENTS: i64 = 1_000_000;
+
 /// Jobs the last process left running: back to the queue, or failed after too
 /// many attempts.
 async fn recover(jobs: &Jobs) -> Result<()> {
     for r in jobs.store.recover(jobs.cfg.max_attempts.max(1)).await? {
         tracing::warn!(job = %r.id, state = r.state.as_str(), attempts = r.attempts, "recovered a job left running");
+        // The dead process may have streamed progress events it never stored (they
+        // are written twice a second): number on past them, so that an id a client
+        // saw is never given to another event (its Last-Event-ID would skip that one).
+        let last = jobs.store.last_event_seq(&r.id).await?;
+        jobs.bus.open(&r.id, last + 1 + UNSTORED_EVENTS);
         let events = match r.state {
             JobState::Queued => vec![(
                 "state",

@@ -5,11 +5,13 @@
 //! is accepted.
 
 use std::path::{Path, PathBuf};
+use std::time::Duration;
 
 use axum::extract::{FromRequest, Multipart, Request};
 use axum::http::StatusCode;
 use futures_util::StreamExt;
 use tokio::io::AsyncWriteExt;
+use tokio::time::Instant;
 
 use super::error::{ApiError, ApiResult};
 use super::AppState;
@@ -17,6 +19,60 @@ use crate::clip::{ClipInfo, DecodeError};
 
 /// Largest `options` part.
 const MAX_OPTIONS_BYTES: usize = 256 << 10;
+
+/// After refusing an upload as too large, the rest of its body is read and dropped
+/// (up to this many bytes, for up to `DRAIN_TIME`, while it keeps coming) before
+/// answering: a server that closes with unread data resets the connection, and the
+/// client, still sending, then sees a broken pipe instead of the 413.
+const DRAIN_MAX_BYTES: u64 = 64 << 20;
+const DRAIN_TIME: Duration = Duration::from_secs(10);
+/// Draining stops when nothing comes for this long.
+const DRAIN_IDLE: Duration = Duration::from_secs(1);
+
+/// When draining waits no longer for the next piece: at `until`, or after a pause
+/// of [`DRAIN_IDLE`].
+fn drain_deadline(until: Instant) -> Instant {
+    until.min(Instant::now() + DRAIN_IDLE)
+}
+
+/// Reads and drops what is left of a refused upload (see [`DRAIN_MAX_BYTES`]).
+async fn drain<S, B, E>(mut stream: S)
+where
+    S: futures_util::Stream<Item = Result<B, E>> + Unpin,
+    B: AsRef<[u8]>,
+{
+    let until = Instant::now() + DRAIN_TIME;
+    let mut n = 0u64;
+    while let Ok(Some(Ok(chunk))) =
+        tokio::time::timeout_at(drain_deadline(until), stream.next()).await
+    {
+        n += chunk.as_ref().len() as u64;
+        if n > DRAIN_MAX_BYTES {
+            break;
+        }
+    }
+}
+
+/// [`drain`] for one part of a multipart body, counting into `n`; false when it
+/// stopped before the end of the part.
+async fn drain_field(
+    field: &mut axum::extract::multipart::Field<'_>,
+    n: &mut u64,
+    until: Instant,
+) -> bool {
+    loop {
+        match tokio::time::timeout_at(drain_deadline(until), field.chunk()).await {
+            Ok(Ok(Some(c))) => {
+                *n += c.len() as u64;
+                if *n > DRAIN_MAX_BYTES {
+                    return false;
+                }
+            }
+            Ok(Ok(None)) => return true,
+            _ => return false,
+        }
+    }
+}
 
 /// A file removed when dropped (unless kept).
 pub struct TempFile(pub PathBuf);
@@ -71,6 +127,9 @@ pub async fn receive(state: &AppState, req: Request) -> ApiResult<Upload> {
         .and_then(|v| v.parse::<u64>().ok())
     {
         if len > limit + MAX_OPTIONS_BYTES as u64 + 64 * 1024 {
+            if len <= DRAIN_MAX_BYTES {
+                drain(req.into_body().into_data_stream()).await;
+            }
             return Err(too_large(limit));
         }
     }
@@ -110,7 +169,10 @@ pub async fn receive(state: &AppState, req: Request) -> ApiResult<Upload> {
         let chunk = chunk.map_err(|e| {
             ApiError::bad_request("bad_upload", format!("the upload ended early: {e}"))
         })?;
-        w.push(&chunk).await?;
+        if let Err(e) = w.push(&chunk).await {
+            drain(stream).await;
+            return Err(e);
+        }
     }
     let bytes = w.finish().await?;
     Ok(Upload {
@@ -149,8 +211,28 @@ async fn receive_multipart(state: &AppState, mp: &mut Multipart) -> ApiResult<Up
                     .unwrap_or_else(|| "clip".into());
                 let file = new_temp(&state.cfg.upload_dir)?;
                 let mut w = ChunkWriter::create(&file.0, limit).await?;
+                let mut refused = None;
                 while let Some(chunk) = field.chunk().await.map_err(bad)? {
-                    w.push(&chunk).await?;
+                    if let Err(e) = w.push(&chunk).await {
+                        refused = Some(e);
+                        break;
+                    }
+                }
+                if let Some(e) = refused {
+                    // Read the rest (see `drain`) so that the client gets the answer.
+                    let until = Instant::now() + DRAIN_TIME;
+                    let mut n = 0;
+                    if drain_field(&mut field, &mut n, until).await {
+                        drop(field);
+                        while let Ok(Ok(Some(mut f))) =
+                            tokio::time::timeout_at(drain_deadline(until), mp.next_field()).await
+                        {
+                            if !drain_field(&mut f, &mut n, until).await {
+                                break;
+                            }
+                        }
+                    }
+                    return Err(e);
                 }
                 let bytes = w.finish().await?;
                 clip = Some((file, name, bytes));

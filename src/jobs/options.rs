@@ -94,9 +94,8 @@ impl JobOptions {
     pub fn to_track(&self) -> Result<ClipTrackOptions, String> {
         let mut o = ClipTrackOptions::default();
         if let Some(f) = self.fov_deg {
-            if !(f.is_finite() && f > 1.0 && f < 179.0) {
-                return Err(format!("fov_deg {f}: expected degrees between 1 and 179"));
-            }
+            // The camera's own rule, so a job is never accepted only to fail.
+            crate::body::camera::Camera::validate(1, 1, f).map_err(|e| format!("fov_deg: {e}"))?;
             o.fov_deg = f;
         }
         if let Some(r) = self.restarts {

@@ -253,6 +253,14 @@ impl Jobs {
         if let Ok(mut m) = self.running.lock() {
             m.insert(id.clone(), stop.clone());
         }
+        // A cancel or a shutdown between the claim and the line above found nothing
+        // to flag: look again now that the flag is there.
+        if matches!(self.store.job(&id).await, Ok(Some(j)) if j.cancel_requested) {
+            stop.halt(CANCEL);
+        }
+        if self.shutdown.is_cancelled() {
+            stop.halt(SHUTDOWN);
+        }
         metrics::gauge!("monocap_jobs_running").increment(1.0);
         let result = self.clone().track(&job, stop.clone()).await;
         metrics::gauge!("monocap_jobs_running").decrement(1.0);
