@@ -77,7 +77,16 @@ pub fn router(state: AppState) -> Router {
         // Uploads are capped by `max_upload_bytes` as they stream (see upload.rs).
         .layer(DefaultBodyLimit::disable())
         .layer(middleware::from_fn(track_requests))
-        .layer(tower_http::trace::TraceLayer::new_for_http())
+        .layer(
+            // A span per request (method, path), its answer logged with status and time.
+            tower_http::trace::TraceLayer::new_for_http()
+                .make_span_with(
+                    tower_http::trace::DefaultMakeSpan::new().level(tracing::Level::INFO),
+                )
+                .on_response(
+                    tower_http::trace::DefaultOnResponse::new().level(tracing::Level::INFO),
+                ),
+        )
         .with_state(state)
 }
 

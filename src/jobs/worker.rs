@@ -15,6 +15,7 @@ use std::time::{Duration, Instant};
 use serde_json::json;
 use tokio::sync::{Notify, Semaphore};
 use tokio_util::sync::CancellationToken;
+use tracing::Instrument;
 
 use super::bus::{Bus, Live};
 use super::options::JobOptions;
@@ -215,13 +216,18 @@ impl Jobs {
             match self.store.claim_next().await {
                 Ok(Some(job)) => {
                     let me = self.clone();
-                    tokio::spawn(async move {
-                        let id = job.id.clone();
-                        if let Err(e) = me.clone().run_job(job).await {
-                            tracing::error!(job = %id, "job bookkeeping failed: {e:#}");
+                    // Everything the job logs, here and on its tracking thread, is
+                    // in its span.
+                    let span = tracing::info_span!("job", id = %job.id, attempt = job.attempts);
+                    tokio::spawn(
+                        async move {
+                            if let Err(e) = me.clone().run_job(job).await {
+                                tracing::error!("job bookkeeping failed: {e:#}");
+                            }
+                            drop(permit);
                         }
-                        drop(permit);
-                    });
+                        .instrument(span),
+                    );
                 }
                 Ok(None) => {
                     drop(permit);
@@ -248,7 +254,6 @@ impl Jobs {
 
     async fn run_job(self: Arc<Self>, job: Job) -> anyhow::Result<()> {
         let id = job.id.clone();
-        let span = tracing::info_span!("job", id = %id, attempt = job.attempts);
         let stop = Arc::new(Stop::new(if job.cancel_requested { CANCEL } else { GO }));
         if let Ok(mut m) = self.running.lock() {
             m.insert(id.clone(), stop.clone());
@@ -261,6 +266,7 @@ impl Jobs {
         if self.shutdown.is_cancelled() {
             stop.halt(SHUTDOWN);
         }
+        tracing::info!(clip = %job.clip_name, bytes = job.clip_bytes, "tracking");
         metrics::gauge!("monocap_jobs_running").increment(1.0);
         let result = self.clone().track(&job, stop.clone()).await;
         metrics::gauge!("monocap_jobs_running").decrement(1.0);
@@ -284,7 +290,7 @@ impl Jobs {
                     )],
                 )
                 .await?;
-                tracing::info!(parent: &span, "back in the queue for the next start");
+                tracing::info!("back in the queue for the next start");
                 return Ok(());
             }
             Err(e) => {
@@ -314,7 +320,7 @@ impl Jobs {
                 }
             }
         };
-        tracing::info!(parent: &span, state = outcome.state.as_str(), "job ended");
+        tracing::info!(state = outcome.state.as_str(), "job ended");
         metrics::counter!("monocap_jobs_finished_total", "state" => outcome.state.as_str())
             .increment(1);
         self.finish(&id, &[JobState::Running], outcome).await?;
@@ -359,7 +365,9 @@ impl Jobs {
                 work.clone(),
                 job.clip_name.clone(),
             );
+            let span = tracing::Span::current();
             tokio::task::spawn_blocking(move || -> Result<(), Failure> {
+                let _span = span.enter();
                 let done = crate::track::run::track_clip(&clip, &opts, |f, p| {
                     live.emit(
                         "progress",
