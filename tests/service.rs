@@ -1868,3 +1868,123 @@ fn a_full_queue_answers_429() {
     let id = id_of(&api.submit_raw("?restarts=1"));
     assert_eq!(api.wait_final(&id)["state"], "succeeded");
 }
+
+/// Without API keys the service runs only on a loopback address: on a public one it
+/// refuses to start, naming the way out; with a key it starts there.
+#[test]
+fn without_keys_the_service_stays_on_loopback() {
+    let dir = TempDir::new("svc-open");
+    let data = dir.path("data");
+    let out = monocap(&[
+        "serve",
+        "--listen",
+        "0.0.0.0:0",
+        "--data-dir",
+        data.to_str().unwrap(),
+    ]);
+    assert!(
+        !out.status.success(),
+        "an open server on 0.0.0.0 must not start"
+    );
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("without API keys") && err.contains("keys create"),
+        "stderr: {err}"
+    );
+    let key = monocap(&[
+        "keys",
+        "create",
+        "--name",
+        "ops",
+        "--data-dir",
+        data.to_str().unwrap(),
+    ]);
+    assert!(key.status.success());
+    let token = String::from_utf8(key.stdout)
+        .unwrap()
+        .lines()
+        .last()
+        .unwrap()
+        .to_string();
+    // With a key it starts on the public address, and requests need the key.
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_monocap"))
+        .args([
+            "serve",
+            "--listen",
+            "0.0.0.0:0",
+            "--data-dir",
+            data.to_str().unwrap(),
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .expect("monocap serve starts");
+    let mut line = String::new();
+    std::io::BufRead::read_line(
+        &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+        &mut line,
+    )
+    .unwrap();
+    let port = line
+        .strip_prefix("monocap: listening on http://0.0.0.0:")
+        .and_then(|r| r.split_whitespace().next())
+        .unwrap_or_else(|| panic!("unexpected first line {line:?}"))
+        .to_string();
+    let url = format!("http://127.0.0.1:{port}/v1/jobs");
+    let without = server::client().get(&url).send().map(|r| r.status());
+    let with = server::client()
+        .get(&url)
+        .bearer_auth(&token)
+        .send()
+        .map(|r| r.status());
+    let _ = child.kill();
+    let _ = child.wait();
+    assert_eq!(
+        without.expect("GET jobs"),
+        401,
+        "with a key configured, requests need it"
+    );
+    assert_eq!(with.expect("GET jobs"), 200);
+}
+
+/// The same service on PostgreSQL (`--database-url`), when a server is given in
+/// `MONOCAP_TEST_DATABASE_URL`: a job runs, streams every frame and serves its
+/// files; the schema is one of its own, dropped afterwards.
+#[test]
+fn a_job_runs_on_postgres() {
+    let Ok(base) = std::env::var("MONOCAP_TEST_DATABASE_URL") else {
+        println!(
+            "skipped: MONOCAP_TEST_DATABASE_URL is not set (a PostgreSQL server to test against)"
+        );
+        return;
+    };
+    let schema = format!("monocap_svc_{}", uuid::Uuid::now_v7().simple());
+    let rt = runtime();
+    let admin = rt
+        .block_on(sqlx::PgPool::connect(&base))
+        .expect("connect to PostgreSQL");
+    let ddl = |sql: String| {
+        rt.block_on(sqlx::query(sqlx::AssertSqlSafe(sql)).execute(&admin))
+            .expect("schema statement");
+    };
+    ddl(format!("CREATE SCHEMA {schema}"));
+    let sep = if base.contains('?') { '&' } else { '?' };
+    let url = format!("{base}{sep}options=-c%20search_path%3D{schema}");
+    let outcome = std::panic::catch_unwind(|| {
+        let svc = Svc::start("svc-pg", &["--database-url", &url]);
+        let api = svc.api(None);
+        let id = id_of(&api.submit_raw("?restarts=1"));
+        let events = all_events(&api.base, None, &id, None);
+        let (_, stored) = split_snapshot(&events, &id);
+        check_success_events(stored, 0..FIXTURE_FRAMES);
+        let bvh = send(api.get(&format!("/v1/jobs/{id}/artifacts/motion.bvh")));
+        assert_eq!(bvh.status(), StatusCode::OK);
+        assert_eq!(bvh_frames(&bvh.bytes().unwrap()), FIXTURE_FRAMES as usize);
+        // Nothing of it is in the data folder's SQLite file.
+        assert!(!svc.dir.path("data").join("monocap.db").exists());
+    });
+    ddl(format!("DROP SCHEMA {schema} CASCADE"));
+    if let Err(e) = outcome {
+        std::panic::resume_unwind(e);
+    }
+}
