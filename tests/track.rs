@@ -146,6 +146,39 @@ fn canceling_stops_the_tracker() {
     assert_eq!(seen, 3);
 }
 
+/// The stop flag ends tracking even where no frame is reported yet: set as the last
+/// frame has been read, it stops the initialisation, before any frame is tracked.
+#[test]
+fn the_stop_flag_interrupts_the_initialisation() {
+    use std::sync::atomic::{AtomicBool, Ordering};
+    let (masks, _, _) = run_masks();
+    let stop = std::sync::Arc::new(AtomicBool::new(false));
+    let o = TrackOptions {
+        restarts: 1,
+        stop: Some(stop.clone()),
+        ..TrackOptions::default()
+    };
+    let tracker = Tracker::new(Camera::new(320, 240, 55.0), o);
+    let mut inputs = inputs(&masks);
+    let flagged = std::iter::from_fn(|| {
+        let next = inputs.next();
+        if next.is_none() {
+            stop.store(true, Ordering::Relaxed);
+        }
+        next
+    });
+    let mut seen = 0;
+    let r = tracker.track(flagged, None, |_, _| {
+        seen += 1;
+        ControlFlow::Continue(())
+    });
+    assert!(
+        matches!(r, Err(monocap::track::tracker::TrackError::Canceled)),
+        "tracking must stop"
+    );
+    assert_eq!(seen, 0, "no frame is tracked after the stop");
+}
+
 #[test]
 fn track_writes_bvh_json_and_model_masks() {
     let dir = TempDir::new("track");

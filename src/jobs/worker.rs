@@ -347,6 +347,7 @@ impl Jobs {
             .map_err(|e| Failure::new("bad_options", e))?;
         opts.limits = self.cfg.limits.clone();
         opts.silhouettes.stop = Some(stop.flag.clone());
+        opts.track.stop = Some(stop.flag.clone());
         let clip = self
             .blobs
             .local_path(&job.clip_key)

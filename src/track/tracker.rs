@@ -77,6 +77,10 @@ pub struct TrackOptions {
     /// Skip the initialisation: start from this shape and pose on the initial frame
     /// (experiments that separate initialisation from tracking).
     pub initial: Option<(ShapeValues, Pose)>,
+    /// When set (by another thread), tracking stops with [`TrackError::Canceled`]
+    /// at the next step, also inside the initialisation, which reports no frame for
+    /// a while (how a service cancels a job promptly).
+    pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
 }
 
 impl Default for TrackOptions {
@@ -93,6 +97,7 @@ impl Default for TrackOptions {
             keyframes: Keyframes::default(),
             features: FeatureOptions::default(),
             initial: None,
+            stop: None,
         }
     }
 }
@@ -282,6 +287,7 @@ impl Tracker {
                 break;
             };
             let input = input.map_err(TrackError::Input)?;
+            self.check_stop()?;
             let (target, score) = next_target(i, input, &mut prev_features, &mut timing)?;
             if target.is_some() {
                 person_frames += 1;
@@ -326,6 +332,8 @@ impl Tracker {
             Some((shape, pose)) => (shape, vec![pose]),
             None => self.initialise(init_target),
         };
+        // Initialisation gives up early when asked to stop; its result is then moot.
+        self.check_stop()?;
         let body = Body::new(&shape);
         // Several candidates: keep the one that explains the next frames best.
         let init_pose = if candidates.len() == 1 {
@@ -345,6 +353,7 @@ impl Tracker {
                 for run in [&after, &before] {
                     let mut history = History::new(*c);
                     for &i in run.iter() {
+                        self.check_stop()?;
                         let t = pending[i].target.as_ref();
                         total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
                     }
@@ -448,6 +457,21 @@ impl Tracker {
     /// Returns the shape and the candidate poses, best first: the best fit and the
     /// best one facing more than 90° away from it (a silhouette seen from the front
     /// and from the back is nearly the same; the frames that follow tell them apart).
+    /// [`TrackError::Canceled`] once [`TrackOptions::stop`] is set.
+    fn check_stop(&self) -> Result<(), TrackError> {
+        match &self.opts.stop {
+            Some(s) if s.load(std::sync::atomic::Ordering::Relaxed) => Err(TrackError::Canceled),
+            _ => Ok(()),
+        }
+    }
+
+    fn stopping(&self) -> bool {
+        self.check_stop().is_err()
+    }
+
+    /// Fits the shape and the first pose to `target` (several candidate poses when
+    /// front and back are ambiguous). Returns early, with a meaningless result, when
+    /// [`TrackOptions::stop`] is set.
     pub fn initialise(&self, target: &Target) -> (ShapeValues, Vec<Pose>) {
         let cam = &self.camera;
         let bbox = mask_bbox(&target.silhouette).expect("a person");
@@ -474,6 +498,9 @@ impl Tracker {
             .map(|k| {
                 let mut p = base;
                 p[ix::ROOT_RY] = k as f64 * 30.0 - 150.0;
+                if self.stopping() {
+                    return (f64::INFINITY, p);
+                }
                 let (pose, cost) = wide.fit_wide(target, p, 2);
                 (cost, pose)
             })
@@ -482,7 +509,10 @@ impl Tracker {
         let mut refined: Vec<(f64, Pose)> = fits
             .iter()
             .take(4)
-            .map(|(_, p)| {
+            .map(|(c, p)| {
+                if self.stopping() {
+                    return (*c, *p);
+                }
                 let (pose, cost) = wide.fit_wide(target, *p, 3);
                 (cost, pose)
             })
@@ -504,6 +534,9 @@ impl Tracker {
         // Shape with the root translation, alternating with the pose.
         let mut shape = STANDARD_SHAPE;
         for _ in 0..3 {
+            if self.stopping() {
+                break;
+            }
             let mut x0: Vec<f64> = shape.to_vec();
             x0.extend_from_slice(&pose[ix::ROOT_TX..=ix::ROOT_TZ]);
             let mut steps: Vec<f64> = SHAPE.iter().map(|s| 3.0 * s.scale).collect();
@@ -538,7 +571,7 @@ impl Tracker {
                 .0;
         }
         let mut poses = vec![pose];
-        if let Some(o) = other {
+        if let Some(o) = other.filter(|_| !self.stopping()) {
             let body = Body::new(&shape);
             let s = Search::new(self, &body, f64::NEG_INFINITY);
             let mut o = o;
