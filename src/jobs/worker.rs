@@ -424,6 +424,10 @@ impl Jobs {
                     if deadline.is_some_and(|d| Instant::now() > d) {
                         stop.halt(TIMEOUT);
                     }
+                    // A cancel that reached another node sharing the database.
+                    if matches!(self.store.job(&id).await, Ok(Some(j)) if j.cancel_requested) {
+                        stop.halt(CANCEL);
+                    }
                     self.flush(&id, &live, &progress).await
                 }
             }
