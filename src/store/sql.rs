@@ -1,6 +1,7 @@
 //! [`Store`] on SQL through sqlx's `Any` driver: the same queries serve SQLite (the
-//! embedded default: one file, write-ahead log) and PostgreSQL (several service nodes
-//! on one database). Each has its migrations (`migrations/sqlite`,
+//! embedded default: one file, write-ahead log) and PostgreSQL (a database server;
+//! the queries are safe for several nodes, but files still live in each node's data
+//! folder, so one node per data folder for now). Each has its migrations (`migrations/sqlite`,
 //! `migrations/postgres`), applied at open. The SQL is the common dialect of both:
 //! `$N` parameters, `ON CONFLICT`, `RETURNING`.
 
