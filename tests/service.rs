@@ -1988,3 +1988,25 @@ fn a_job_runs_on_postgres() {
         std::panic::resume_unwind(e);
     }
 }
+
+/// A rerun takes options only: a huge body is refused with the JSON error, not read
+/// into memory.
+#[test]
+fn a_rerun_body_is_small() {
+    let svc = Svc::start("svc-rerun-cap", &[]);
+    let api = svc.api(None);
+    let id = id_of(&api.submit_raw("?restarts=1"));
+    let big = vec![b' '; 1 << 20];
+    let res = send(
+        api.post(&format!("/v1/jobs/{id}/rerun"))
+            .header("content-type", "application/json")
+            .body(big),
+    );
+    assert_error(
+        res,
+        StatusCode::PAYLOAD_TOO_LARGE,
+        "too_large",
+        "a 1 MiB rerun body",
+    );
+    assert_eq!(send(api.get("/healthz")).status(), StatusCode::OK);
+}

@@ -159,7 +159,16 @@ async fn contract(store: &dyn Store) {
     assert_eq!(after, vec![ev(2, "progress"), ev(3, "progress")]);
     assert_eq!(store.events_after(&id[0], 0, 1).await.unwrap().len(), 1);
     assert_eq!(store.last_event_seq(&id[0]).await.unwrap(), 3);
-    assert_eq!(store.last_event_seq(&id[2]).await.unwrap(), 0);
+    // A new job's first event came with it.
+    assert_eq!(store.last_event_seq(&id[2]).await.unwrap(), 1);
+    assert_eq!(
+        store.events_after(&id[2], 0, 10).await.unwrap(),
+        vec![Event {
+            seq: 1,
+            kind: "state".into(),
+            data: json!({ "state": "queued" }),
+        }]
+    );
 
     // Finishing only from the states named, with the final events.
     let done = Outcome {

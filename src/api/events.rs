@@ -125,7 +125,9 @@ async fn pump(
             let Some(sig) = signal.as_mut() else { break };
             tokio::select! {
                 r = sig.changed() => if r.is_err() { break },
-                _ = tokio::time::sleep(Duration::from_secs(5)) => {}
+                // Quiet for a while: look at the database again (the job may have
+                // ended without this log hearing of it).
+                _ = tokio::time::sleep(Duration::from_secs(5)) => break,
                 _ = s.jobs.shutdown.cancelled() => return Ok(()),
                 _ = tx.closed() => return Ok(()),
             }

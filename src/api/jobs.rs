@@ -13,6 +13,9 @@ use super::{AppState, Caller};
 use crate::jobs::options::JobOptions;
 use crate::store::{Inserted, Job, JobFilter, JobState, NewJob};
 
+/// Largest body of a rerun (its options).
+pub const MAX_RERUN_BYTES: usize = 256 << 10;
+
 /// Longest idempotency key.
 const MAX_IDEMPOTENCY_KEY: usize = 200;
 
@@ -300,11 +303,8 @@ async fn submit(
     }
 }
 
-/// Announces a new job and wakes the pool.
-async fn queued(s: &AppState, job: &Job) -> ApiResult<()> {
-    s.jobs
-        .record(&job.id, vec![("state", json!({ "state": "queued" }))])
-        .await?;
+/// Wakes the pool for a new job (its `queued` event was stored with it).
+async fn queued(s: &AppState, _job: &Job) -> ApiResult<()> {
     metrics::counter!("monocap_jobs_submitted_total").increment(1);
     s.jobs.wake();
     Ok(())
@@ -459,9 +459,18 @@ pub async fn rerun(
     State(s): State<AppState>,
     caller: Caller,
     ApiPath(id): ApiPath<String>,
-    body: axum::body::Bytes,
+    body: Result<axum::body::Bytes, axum::extract::rejection::BytesRejection>,
 ) -> ApiResult<Response> {
     let old = owned(&s, &caller, &id).await?;
+    let body = body.map_err(|e| {
+        super::error::from_rejection(
+            e.status(),
+            format!(
+                "the rerun options are larger than {MAX_RERUN_BYTES} bytes, or unreadable: {}",
+                e.body_text()
+            ),
+        )
+    })?;
     check_queue(&s).await?;
     let old_opts: JobOptions = serde_json::from_value(old.options.clone())
         .map_err(|e| ApiError::internal(format!("stored options: {e}")))?;

@@ -22,10 +22,10 @@ pub struct Live {
 }
 
 struct Inner {
-    events: Vec<Event>,
+    /// Ordered by number, each with whether the database has it.
+    events: Vec<(Event, bool)>,
+    /// The next number to give (numbers given are never given again).
     next_seq: i64,
-    /// Events before this index are in the database.
-    flushed: usize,
     closed: bool,
 }
 
@@ -35,7 +35,6 @@ impl Live {
             inner: Mutex::new(Inner {
                 events: Vec::new(),
                 next_seq,
-                flushed: 0,
                 closed: false,
             }),
             signal: watch::channel(next_seq - 1).0,
@@ -47,7 +46,8 @@ impl Live {
         self.inner.lock().unwrap_or_else(|p| p.into_inner())
     }
 
-    /// Appends an event and wakes the subscribers; returns it with its number.
+    /// Appends an event (to be stored later) and wakes the subscribers; returns it
+    /// with its number.
     pub fn emit(&self, kind: &str, data: serde_json::Value) -> Event {
         let event = {
             let mut g = self.lock();
@@ -57,17 +57,20 @@ impl Live {
                 data,
             };
             g.next_seq += 1;
-            g.events.push(e.clone());
+            g.events.push((e.clone(), false));
             e
         };
         self.signal.send_replace(event.seq);
         event
     }
 
-    /// Numbers events without publishing them (to store them first; see
-    /// [`Live::publish`]). Only one task may prepare events of a job at a time.
+    /// Numbers events without publishing them, to store them first (see
+    /// [`Live::publish`]); the numbers are reserved, so events emitted meanwhile get
+    /// later ones. Numbers of events never published are simply skipped.
     pub fn prepare(&self, events: Vec<(&str, serde_json::Value)>) -> Vec<Event> {
-        let next = self.lock().next_seq;
+        let mut g = self.lock();
+        let next = g.next_seq;
+        g.next_seq += events.len() as i64;
         events
             .into_iter()
             .enumerate()
@@ -79,40 +82,50 @@ impl Live {
             .collect()
     }
 
-    /// Publishes events made by [`Live::prepare`] and already stored, in order.
+    /// Publishes events made by [`Live::prepare`] and already stored.
     pub fn publish(&self, events: &[Event]) {
-        let Some(last) = events.last() else { return };
+        let Some(last) = events.iter().map(|e| e.seq).max() else {
+            return;
+        };
         {
             let mut g = self.lock();
-            let all_flushed = g.flushed == g.events.len();
-            g.events.extend(events.iter().cloned());
-            g.next_seq = last.seq + 1;
-            if all_flushed {
-                g.flushed = g.events.len();
+            for e in events {
+                let at = g.events.partition_point(|(x, _)| x.seq < e.seq);
+                g.events.insert(at, (e.clone(), true));
             }
+            g.next_seq = g.next_seq.max(last + 1);
         }
-        self.signal.send_replace(last.seq);
+        self.signal.send_replace(last);
     }
 
     /// Events after `seq`, and whether the log is closed (no more will come).
     pub fn after(&self, seq: i64) -> (Vec<Event>, bool) {
         let g = self.lock();
-        let start = g.events.partition_point(|e| e.seq <= seq);
-        (g.events[start..].to_vec(), g.closed)
+        let start = g.events.partition_point(|(e, _)| e.seq <= seq);
+        (
+            g.events[start..].iter().map(|(e, _)| e.clone()).collect(),
+            g.closed,
+        )
     }
 
-    /// The events not yet written to the database (marked written).
-    pub fn take_unflushed(&self) -> Vec<Event> {
-        let mut g = self.lock();
-        let out = g.events[g.flushed..].to_vec();
-        g.flushed = g.events.len();
-        out
+    /// The events the database does not have yet (see [`Live::mark_stored`]).
+    pub fn unstored(&self) -> Vec<Event> {
+        let g = self.lock();
+        g.events
+            .iter()
+            .filter(|(_, stored)| !stored)
+            .map(|(e, _)| e.clone())
+            .collect()
     }
 
-    /// Marks the events up to and including `seq` as written to the database.
-    pub fn mark_flushed(&self, seq: i64) {
+    /// Marks the events up to and including `seq` as stored.
+    pub fn mark_stored(&self, seq: i64) {
         let mut g = self.lock();
-        g.flushed = g.events.partition_point(|e| e.seq <= seq);
+        for (e, stored) in g.events.iter_mut() {
+            if e.seq <= seq {
+                *stored = true;
+            }
+        }
     }
 
     /// A receiver woken on every new event and on close.
@@ -187,12 +200,25 @@ mod tests {
         let (after, closed) = live.after(5);
         assert_eq!(after.iter().map(|e| e.seq).collect::<Vec<_>>(), [6]);
         assert!(!closed);
-        assert_eq!(live.take_unflushed().len(), 2);
-        assert!(live.take_unflushed().is_empty());
+        assert_eq!(live.unstored().len(), 2);
+        live.mark_stored(6);
+        assert!(live.unstored().is_empty());
+        // Prepared numbers are reserved: an event emitted meanwhile comes after them,
+        // and publishing puts them in order.
+        let prepared = live.prepare(vec![("state", serde_json::json!({}))]);
+        assert_eq!(prepared[0].seq, 7);
+        assert_eq!(live.emit("progress", serde_json::json!({})).seq, 8);
+        live.publish(&prepared);
+        let (after, _) = live.after(6);
+        assert_eq!(after.iter().map(|e| e.seq).collect::<Vec<_>>(), [7, 8]);
+        assert_eq!(
+            live.unstored().iter().map(|e| e.seq).collect::<Vec<_>>(),
+            [8]
+        );
         // A second open finds the same log.
-        assert_eq!(bus.open("a", 1).emit("x", serde_json::json!(1)).seq, 7);
+        assert_eq!(bus.open("a", 1).emit("x", serde_json::json!(1)).seq, 9);
         bus.remove("a");
-        assert!(live.after(7).1, "removed logs are closed");
+        assert!(live.after(9).1, "removed logs are closed");
         assert!(bus.get("a").is_none());
     }
 }

@@ -148,7 +148,10 @@ impl Jobs {
         from: &[JobState],
         outcome: Outcome,
     ) -> anyhow::Result<bool> {
-        let live = self.live(job).await?;
+        // A job tracking in this process has a live log that numbers its events; any
+        // other is numbered after what is stored (opening a log here would leave one
+        // nobody closes when the job is not in `from`).
+        let live = self.bus.get(job);
         let final_event = match outcome.state {
             JobState::Succeeded => (
                 "done",
@@ -159,16 +162,32 @@ impl Jobs {
                 json!({ "state": s.as_str(), "error": outcome.error }),
             ),
         };
-        let events = live.prepare(vec![
+        let list = vec![
             ("state", json!({ "state": outcome.state.as_str() })),
             final_event,
-        ]);
+        ];
+        let events = match &live {
+            Some(l) => l.prepare(list),
+            None => {
+                let next = self.store.last_event_seq(job).await? + 1;
+                list.into_iter()
+                    .zip(next..)
+                    .map(|((kind, data), seq)| Event {
+                        seq,
+                        kind: kind.into(),
+                        data,
+                    })
+                    .collect()
+            }
+        };
         let done = self
             .store
             .finish(job, from, outcome, events.clone())
             .await?;
         if done {
-            live.publish(&events);
+            if let Some(l) = &live {
+                l.publish(&events);
+            }
             self.bus.remove(job);
         }
         Ok(done)
@@ -323,8 +342,23 @@ impl Jobs {
         tracing::info!(state = outcome.state.as_str(), "job ended");
         metrics::counter!("monocap_jobs_finished_total", "state" => outcome.state.as_str())
             .increment(1);
-        self.finish(&id, &[JobState::Running], outcome).await?;
-        Ok(())
+        // The outcome must reach the database, or the job would look running until
+        // the next start: retry through passing database trouble.
+        let mut wait = Duration::from_millis(200);
+        loop {
+            match self
+                .finish(&id, &[JobState::Running], outcome.clone())
+                .await
+            {
+                Ok(_) => return Ok(()),
+                Err(e) if !self.shutdown.is_cancelled() => {
+                    tracing::warn!("cannot store the job's outcome, retrying: {e:#}");
+                    tokio::time::sleep(wait).await;
+                    wait = (wait * 2).min(Duration::from_secs(10));
+                }
+                Err(e) => return Err(e),
+            }
+        }
     }
 
     /// Tracks the job's clip and stores its files.
@@ -471,10 +505,12 @@ impl Jobs {
 
     /// Writes the events and progress not yet in the database.
     async fn flush(&self, id: &str, live: &Live, progress: &Mutex<Option<ProgressRow>>) {
-        let events = live.take_unflushed();
-        if !events.is_empty() {
-            if let Err(e) = self.store.append_events(id, events).await {
-                tracing::warn!(job = %id, "cannot store progress events: {e}");
+        let events = live.unstored();
+        if let Some(last) = events.last().map(|e| e.seq) {
+            // Marked stored only once they are: a failed write is retried next time.
+            match self.store.append_events(id, events).await {
+                Ok(()) => live.mark_stored(last),
+                Err(e) => tracing::warn!(job = %id, "cannot store progress events: {e}"),
             }
         }
         let p = progress.lock().ok().and_then(|mut g| g.take());

@@ -178,8 +178,8 @@ pub type StoreResult<T> = Result<T, sqlx::Error>;
 /// The service's database. Handlers and workers see only this trait, so a second
 /// database (PostgreSQL) is a second implementation, not a change to them.
 pub trait Store: Send + Sync + 'static {
-    /// Inserts a queued job, or returns the existing one with the same owner and
-    /// idempotency key.
+    /// Inserts a queued job with its first event (number 1, `state` queued), or
+    /// returns the existing one with the same owner and idempotency key.
     fn insert_job(&self, job: NewJob) -> BoxFuture<'_, StoreResult<Inserted>>;
     fn job(&self, id: &str) -> BoxFuture<'_, StoreResult<Option<Job>>>;
     /// Newest first.

@@ -196,6 +196,7 @@ impl Store for SqlStore {
                 }
             }
             let now = now_ms();
+            let mut tx = self.pool.begin().await?;
             let res = sqlx::query(
                 "INSERT INTO jobs (id, owner, state, options, clip_key, clip_name, clip_bytes, \
                  clip_info, idempotency_key, rerun_of, created_at, updated_at) \
@@ -211,12 +212,13 @@ impl Store for SqlStore {
             .bind(&job.idempotency_key)
             .bind(&job.rerun_of)
             .bind(now)
-            .execute(&self.pool)
+            .execute(&mut *tx)
             .await;
             match res {
                 Ok(_) => {}
                 // Two uploads with the same key at once: the other one won.
                 Err(sqlx::Error::Database(e)) if e.is_unique_violation() => {
+                    tx.rollback().await?;
                     if let Some(key) = &job.idempotency_key {
                         if let Some(existing) = self.job_by_idempotency(&job.owner, key).await? {
                             return Ok(Inserted::Existing(existing));
@@ -226,6 +228,14 @@ impl Store for SqlStore {
                 }
                 Err(e) => return Err(e),
             }
+            // Event 1, stored with the job: nothing else can number it.
+            let first = Event {
+                seq: 1,
+                kind: "state".into(),
+                data: serde_json::json!({ "state": "queued" }),
+            };
+            Self::insert_events(&mut tx, &job.id, &[first]).await?;
+            tx.commit().await?;
             let inserted = self
                 .job_by_id(&job.id)
                 .await?
@@ -480,8 +490,10 @@ impl Store for SqlStore {
                  state = CASE WHEN attempts >= $1 OR cancel_requested = 1 THEN \
                    (CASE WHEN cancel_requested = 1 THEN 'canceled' ELSE 'failed' END) \
                    ELSE 'queued' END, \
-                 error_code = CASE WHEN attempts >= $1 AND cancel_requested = 0 THEN 'gave_up' END, \
-                 error_message = CASE WHEN attempts >= $1 AND cancel_requested = 0 THEN \
+                 error_code = CASE WHEN cancel_requested = 1 THEN 'canceled' \
+                   WHEN attempts >= $1 THEN 'gave_up' END, \
+                 error_message = CASE WHEN cancel_requested = 1 THEN 'the job was canceled' \
+                   WHEN attempts >= $1 THEN \
                    'the service stopped while tracking this clip ' || attempts || \
                    ' times; not trying again' END, \
                  finished_at = CASE WHEN attempts >= $1 OR cancel_requested = 1 THEN $2 END, \
