@@ -99,7 +99,6 @@ pub fn from_rejection(status: StatusCode, text: String) -> ApiError {
     let code = match status {
         StatusCode::PAYLOAD_TOO_LARGE => "too_large",
         StatusCode::UNSUPPORTED_MEDIA_TYPE => "unsupported_media",
-        StatusCode::UNPROCESSABLE_ENTITY => "bad_request",
         _ => "bad_request",
     };
     ApiError::new(status, code, text)

@@ -9,7 +9,7 @@ use axum::response::{IntoResponse, Response};
 use futures_util::StreamExt;
 
 use super::error::{ApiError, ApiPath, ApiResult};
-use super::jobs::owned;
+use super::jobs::{if_none_match, owned};
 use super::{AppState, Caller};
 use crate::jobs::worker::artifact_key;
 
@@ -81,11 +81,7 @@ pub async fn artifact(
         "content-disposition",
         hv(&format!("attachment; filename=\"{}\"", a.name))?,
     );
-    let matches = headers
-        .get("if-none-match")
-        .and_then(|v| v.to_str().ok())
-        .is_some_and(|v| v.split(',').any(|t| t.trim() == tag || t.trim() == "*"));
-    if matches {
+    if if_none_match(&headers, &tag) {
         return Ok((StatusCode::NOT_MODIFIED, h).into_response());
     }
     // A Range with a stale If-Range gets the whole file.

@@ -95,7 +95,8 @@ fn etag(job: &Job, pos: Option<u64>) -> String {
     )
 }
 
-fn if_none_match(headers: &HeaderMap, tag: &str) -> bool {
+/// Whether `If-None-Match` names `tag` (or `*`).
+pub(super) fn if_none_match(headers: &HeaderMap, tag: &str) -> bool {
     headers
         .get("if-none-match")
         .and_then(|v| v.to_str().ok())
@@ -289,7 +290,7 @@ async fn submit(
     };
     match s.jobs.store.insert_job(new).await {
         Ok(Inserted::New(job)) => {
-            queued(s, &job).await?;
+            queued(s);
             Ok(job)
         }
         Ok(Inserted::Existing(job)) => {
@@ -304,10 +305,9 @@ async fn submit(
 }
 
 /// Wakes the pool for a new job (its `queued` event was stored with it).
-async fn queued(s: &AppState, _job: &Job) -> ApiResult<()> {
+fn queued(s: &AppState) {
     metrics::counter!("monocap_jobs_submitted_total").increment(1);
     s.jobs.wake();
-    Ok(())
 }
 
 #[derive(serde::Deserialize)]
@@ -501,7 +501,7 @@ pub async fn rerun(
     let Inserted::New(job) = s.jobs.store.insert_job(new).await? else {
         return Err(ApiError::internal("a rerun matched an idempotency key"));
     };
-    queued(&s, &job).await?;
+    queued(&s);
     let pos = s.jobs.store.queue_position(&job.id).await?;
     Ok(accepted(&job, pos))
 }

@@ -71,15 +71,7 @@ impl Live {
         let mut g = self.lock();
         let next = g.next_seq;
         g.next_seq += events.len() as i64;
-        events
-            .into_iter()
-            .enumerate()
-            .map(|(i, (kind, data))| Event {
-                seq: next + i as i64,
-                kind: kind.to_string(),
-                data,
-            })
-            .collect()
+        numbered(next, events)
     }
 
     /// Publishes events made by [`Live::prepare`] and already stored.
@@ -140,6 +132,19 @@ impl Live {
     }
 }
 
+/// Events numbered from `next` on.
+pub fn numbered(next: i64, events: Vec<(&str, serde_json::Value)>) -> Vec<Event> {
+    events
+        .into_iter()
+        .zip(next..)
+        .map(|((kind, data), seq)| Event {
+            seq,
+            kind: kind.to_string(),
+            data,
+        })
+        .collect()
+}
+
 /// The live logs by job id.
 #[derive(Default)]
 pub struct Bus {
@@ -172,15 +177,6 @@ impl Bus {
         if let Some(live) = self.map().remove(id) {
             live.close();
         }
-    }
-
-    /// How many jobs have a live log.
-    pub fn len(&self) -> usize {
-        self.map().len()
-    }
-
-    pub fn is_empty(&self) -> bool {
-        self.len() == 0
     }
 }
 

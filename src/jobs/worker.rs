@@ -17,7 +17,7 @@ use tokio::sync::{Notify, Semaphore};
 use tokio_util::sync::CancellationToken;
 use tracing::Instrument;
 
-use super::bus::{Bus, Live};
+use super::bus::{numbered, Bus, Live};
 use super::options::JobOptions;
 use crate::motion::files::{write_model_masks, write_motion, MotionFormat};
 use crate::store::blobs::Blobs;
@@ -107,11 +107,6 @@ impl Jobs {
         }
     }
 
-    /// Jobs tracking right now.
-    pub fn running_count(&self) -> usize {
-        self.running.lock().map(|m| m.len()).unwrap_or(0)
-    }
-
     /// Tells the dispatcher a job was queued.
     pub fn wake(&self) {
         self.wake.notify_one();
@@ -168,17 +163,7 @@ impl Jobs {
         ];
         let events = match &live {
             Some(l) => l.prepare(list),
-            None => {
-                let next = self.store.last_event_seq(job).await? + 1;
-                list.into_iter()
-                    .zip(next..)
-                    .map(|((kind, data), seq)| Event {
-                        seq,
-                        kind: kind.into(),
-                        data,
-                    })
-                    .collect()
-            }
+            None => numbered(self.store.last_event_seq(job).await? + 1, list),
         };
         let done = self
             .store
@@ -279,7 +264,7 @@ impl Jobs {
         }
         // A cancel or a shutdown between the claim and the line above found nothing
         // to flag: look again now that the flag is there.
-        if matches!(self.store.job(&id).await, Ok(Some(j)) if j.cancel_requested) {
+        if self.cancel_recorded(&id).await {
             stop.halt(CANCEL);
         }
         if self.shutdown.is_cancelled() {
@@ -459,7 +444,7 @@ impl Jobs {
                         stop.halt(TIMEOUT);
                     }
                     // A cancel that reached another node sharing the database.
-                    if matches!(self.store.job(&id).await, Ok(Some(j)) if j.cancel_requested) {
+                    if self.cancel_recorded(&id).await {
                         stop.halt(CANCEL);
                     }
                     self.flush(&id, &live, &progress).await
@@ -501,6 +486,12 @@ impl Jobs {
             });
         }
         Ok(out)
+    }
+
+    /// Whether the database holds a cancel for the job (made by a request this
+    /// process has not flagged, or by another node).
+    async fn cancel_recorded(&self, id: &str) -> bool {
+        matches!(self.store.job(id).await, Ok(Some(j)) if j.cancel_requested)
     }
 
     /// Writes the events and progress not yet in the database.
