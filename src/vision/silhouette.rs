@@ -5,6 +5,8 @@
 //! thresholded as they are.
 
 use image::RgbImage;
+use imageproc::distance_transform::Norm;
+use imageproc::morphology::dilate;
 
 use super::background::{
     BackgroundBuilder, BackgroundModel, BackgroundOptions, ModelSource, Refiner,
@@ -56,15 +58,16 @@ impl Segmenter {
     ) -> Result<Segmenter, E> {
         let mut builder = BackgroundBuilder::new(width, height, opts.background.empty.clone());
         pass(&mut |f| builder.push(f))?;
-        let mut model = builder.finish();
+        let (mut model, candidates) = builder.finish_with_candidates();
         if let (ModelSource::WholeClip { .. }, Some(grow)) = (&model.source, opts.refine_grow) {
-            let mut refiner = Refiner::new(model);
+            let mut refiner = Refiner::new(model, candidates);
             let mut raw = Mask::new(width, height);
             let grow = ((height as f64 * grow).round().min(255.0) as u8).max(1);
             pass(&mut |f| {
                 refiner.base().foreground(f, &opts.background, &mut raw);
                 let person = person_region(&raw, &opts.cleanup, grow);
-                refiner.push(f, &person);
+                let around = Mask::from_gray(&dilate(&person.to_gray(), Norm::LInf, grow), 128);
+                refiner.push(f, &raw, &person, &around);
             })?;
             model = refiner.finish();
         }
