@@ -440,6 +440,9 @@ fn silhouettes_command(a: SilhouettesArgs) -> Result<()> {
         done.frames,
         done.frames as f64 / secs.max(1e-9)
     );
+    if let Some(w) = done.warning() {
+        eprintln!("monocap: warning: {w}");
+    }
     Ok(())
 }
 
@@ -637,6 +640,9 @@ fn track_command(a: TrackArgs) -> Result<()> {
     }
     if let Some(p) = &a.model_masks {
         write_model_masks(&done, p)?;
+    }
+    for w in &done.warnings {
+        eprintln!("monocap: warning: {w}");
     }
     let frames = done.track.frames.len();
     let people = done.track.frames.iter().filter(|f| f.person).count();

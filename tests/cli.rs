@@ -296,6 +296,48 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
 }
 
 #[test]
+fn a_person_who_never_moves_without_person_free_frames_gets_a_warning() {
+    // One frame of a person, repeated: no frame shows the scene behind them, so a
+    // background learned from the clip is the person, and the silhouettes are empty.
+    let dir = TempDir::new("still");
+    let moving = dir.path("moving.zip");
+    assert_success("synth", &synth(&moving, &["--style", "color"]));
+    let mut frame = Vec::new();
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&moving).unwrap()).unwrap();
+    std::io::Read::read_to_end(&mut zip.by_name("000010.png").unwrap(), &mut frame).unwrap();
+    let still = dir.path("still.zip");
+    let mut w = zip::ZipWriter::new(std::fs::File::create(&still).unwrap());
+    for i in 0..12 {
+        w.start_file(
+            format!("{i:06}.png"),
+            zip::write::SimpleFileOptions::default(),
+        )
+        .unwrap();
+        std::io::Write::write_all(&mut w, &frame).unwrap();
+    }
+    w.finish().unwrap();
+    let out = monocap(&["silhouettes", s(&still), "-o", s(&dir.path("m.zip"))]);
+    assert_success("silhouettes", &out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("warning: the silhouettes are nearly empty")
+            && stderr.contains("--empty-frames"),
+        "{stderr}"
+    );
+    // Tracking finds no person, and says why in its one line.
+    assert_fails_with(
+        "track a still person",
+        &monocap(&["track", s(&still), "-o", s(&dir.path("m.bvh"))]),
+        "no person-free frames",
+    );
+    // The moving person gets no warning.
+    let out = monocap(&["silhouettes", s(&moving), "-o", s(&dir.path("n.zip"))]);
+    assert_success("silhouettes", &out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("warning"), "{stderr}");
+}
+
+#[test]
 fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
     let dir = TempDir::new("tiny");
     // Tiny frames are legal: they must render, not panic.

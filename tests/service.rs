@@ -1989,6 +1989,56 @@ fn a_job_runs_on_postgres() {
     }
 }
 
+/// A person who never moves in a clip with no person-free frames is taken for the
+/// scene: the job fails, and its error says why and what to do.
+#[test]
+fn a_still_person_fails_with_the_reason() {
+    let dir = TempDir::new("svc-still");
+    let moving = dir.path("moving.zip");
+    let out = monocap(&[
+        "synth",
+        "--bvh",
+        "tests/fixtures/bandai_run_normal_001_20f.bvh",
+        "--out",
+        common::s(&moving),
+    ]);
+    assert!(out.status.success(), "synth: {out:?}");
+    let mut frame = Vec::new();
+    let mut zip = zip::ZipArchive::new(std::fs::File::open(&moving).unwrap()).unwrap();
+    zip.by_name("000010.png")
+        .unwrap()
+        .read_to_end(&mut frame)
+        .unwrap();
+    let mut still = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    for i in 0..12 {
+        still
+            .start_file(
+                format!("{i:06}.png"),
+                zip::write::SimpleFileOptions::default(),
+            )
+            .unwrap();
+        still.write_all(&frame).unwrap();
+    }
+    let still = still.finish().unwrap().into_inner();
+
+    let svc = Svc::start("svc-still", &[]);
+    let api = svc.api(None);
+    let id = id_of(&accepted(api.raw_upload(
+        "?restarts=1",
+        "application/zip",
+        still,
+        None,
+    )));
+    let done = api.wait_final(&id);
+    assert_eq!(done["state"], "failed", "{done}");
+    assert_eq!(done["error"]["code"], "tracking_failed", "{done}");
+    let message = done["error"]["message"].as_str().unwrap_or_default();
+    assert!(
+        message.contains("no person found") && message.contains("person-free frames"),
+        "{message}"
+    );
+}
+
 /// A rerun takes options only: a huge body is refused with the JSON error, not read
 /// into memory.
 #[test]

@@ -425,6 +425,10 @@ impl Jobs {
                         format!("{e:#}").replace(&path, &clip_name),
                     )
                 })?;
+                for w in &done.warnings {
+                    tracing::warn!("{w}");
+                    live.emit("warning", json!({ "message": w }));
+                }
                 write_motion(&done, MotionFormat::Bvh, &work.join("motion.bvh"))
                     .and_then(|()| {
                         write_motion(&done, MotionFormat::Json, &work.join("motion.json"))

@@ -63,6 +63,9 @@ pub struct ClipTrack {
     /// Frames per second used (the clip's, or 30 when it does not say).
     pub fps: f64,
     pub track: Track,
+    /// What the user should know about the result (see
+    /// [`crate::vision::silhouette::ClipSilhouettes::warning`]).
+    pub warnings: Vec<String>,
 }
 
 /// The camera of a `width`×`height` clip and the whole factor the tracker scales
@@ -218,9 +221,13 @@ pub fn track_clip(
                         .map_err(|_| anyhow::anyhow!("tracking stopped"))
                 },
             );
-            if let Err(e) = sent {
-                if !past_end.load(std::sync::atomic::Ordering::Relaxed) {
-                    let _ = tx.send(Err(e));
+            match sent {
+                Ok(done) => done.warning(),
+                Err(e) => {
+                    if !past_end.load(std::sync::atomic::Ordering::Relaxed) {
+                        let _ = tx.send(Err(e));
+                    }
+                    None
                 }
             }
         });
@@ -234,16 +241,27 @@ pub fn track_clip(
         });
         drop(rx);
         match producer.join() {
-            Ok(()) => tracked,
+            Ok(warning) => (tracked, warning),
             // A bug, not bad input; never a silently shortened motion.
-            Err(_) => Err(TrackError::Input(anyhow::anyhow!(
-                "silhouette extraction failed unexpectedly"
-            ))),
+            Err(_) => (
+                Err(TrackError::Input(anyhow::anyhow!(
+                    "silhouette extraction failed unexpectedly"
+                ))),
+                None,
+            ),
         }
     });
-    let mut track = result.map_err(|e| match e {
-        TrackError::Input(e) => e,
-        e => anyhow::Error::from(e),
+    let (tracked, warning) = result;
+    let mut track = tracked.map_err(|e| {
+        let e = match e {
+            TrackError::Input(e) => e,
+            e => anyhow::Error::from(e),
+        };
+        // Why no person was found, when the silhouettes tell.
+        match &warning {
+            Some(w) => anyhow::anyhow!("{e:#}; {w}"),
+            None => e,
+        }
     })?;
     for f in &mut track.frames {
         f.index += first;
@@ -254,6 +272,7 @@ pub fn track_clip(
         camera,
         fps,
         track,
+        warnings: warning.into_iter().collect(),
     })
 }
 

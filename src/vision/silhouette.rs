@@ -103,6 +103,46 @@ pub struct ClipSilhouettes {
     /// Where the background came from (None for a mask clip).
     pub source: Option<ModelSource>,
     pub frames: usize,
+    /// The median over the frames of the silhouette's share of the image.
+    pub median_foreground: f64,
+}
+
+/// Below this median share of the image, silhouettes from a whole-clip background
+/// are taken for a failure (see [`ClipSilhouettes::warning`]): a person this small
+/// (some 14×14 pixels of a 320×240 frame) cannot be tracked anyway.
+const MIN_MEDIAN_FOREGROUND: f64 = 0.0025;
+
+impl ClipSilhouettes {
+    /// What the user should know about silhouettes that look wrong. A background
+    /// learned from the whole clip is the scene only where the person moves off it:
+    /// a person who stands still in every frame is taken for the scene and their
+    /// silhouette is nearly empty.
+    pub fn warning(&self) -> Option<String> {
+        match self.source {
+            Some(ModelSource::WholeClip { .. })
+                if self.frames > 0 && self.median_foreground < MIN_MEDIAN_FOREGROUND =>
+            {
+                Some(format!(
+                    "the silhouettes are nearly empty (median {:.2}% of the image): the clip \
+                     has no person-free frames and the person seems to stay on the same spot, \
+                     so they were taken for the scene; name the clip's person-free frames \
+                     (--empty-frames A..B), film a few seconds of the empty scene before the \
+                     person steps in, or give the silhouettes as a mask clip",
+                    100.0 * self.median_foreground
+                ))
+            }
+            _ => None,
+        }
+    }
+}
+
+/// The median of a list of shares (0 when empty).
+fn median(mut v: Vec<f32>) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    let mid = v.len() / 2;
+    *v.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
 }
 
 /// The silhouette of every frame of the clip at `path`, handed to `each` with the
@@ -148,17 +188,23 @@ pub fn clip_silhouettes(
         Ok(())
     };
     let mut frames = 0;
+    // 4 bytes a frame: a 10-minute clip at 30 frames/s keeps 72 kB.
+    let mut shares = Vec::new();
+    let area = (w as f32 * h as f32).max(1.0);
     if masks || info.is_mask {
         let mut src = open_with(path, limits, true)?;
         while let Some(f) = src.next_frame()? {
             check_frame(&f)?;
-            each(frames, &f, &mask_from_frame(&f))?;
+            let mask = mask_from_frame(&f);
+            shares.push(mask.count() as f32 / area);
+            each(frames, &f, &mask)?;
             frames += 1;
         }
         return Ok(ClipSilhouettes {
             info,
             source: None,
             frames,
+            median_foreground: median(shares),
         });
     }
     let seg = Segmenter::learn(w, h, opts, |visit| {
@@ -174,6 +220,7 @@ pub fn clip_silhouettes(
     while let Some(f) = src.next_frame()? {
         check_frame(&f)?;
         seg.silhouette(&f, &mut mask);
+        shares.push(mask.count() as f32 / area);
         each(frames, &f, &mask)?;
         frames += 1;
     }
@@ -181,5 +228,6 @@ pub fn clip_silhouettes(
         info,
         source: Some(seg.model.source.clone()),
         frames,
+        median_foreground: median(shares),
     })
 }
