@@ -17,7 +17,7 @@
 //!   scene's around them. Method.md suggests the per-pixel median, right only where
 //!   the person is absent in more than half the frames; on the DAVIS benchmark
 //!   without person-free frames the median scores IoU 0.713 / 0.866 / 0.887 (lucia,
-//!   dance-twirl, tennis) and this model 0.790 / 0.958 / 0.941
+//!   dance-twirl, tennis) and this model 0.813 / 0.958 / 0.940
 //!   (`tests/silhouette_quality.rs` measures both).
 //!
 //! Memory, whatever the clip's length: about 130 bytes a pixel while learning (32
@@ -354,22 +354,23 @@ impl BackgroundBuilder {
 /// the frames in which the pixel lies outside the (generously grown) silhouette show
 /// the scene itself.
 ///
-/// A pixel never outside any silhouette is decided by colour. Where the scene is
-/// sure (one colour nearly all the clip), each frame's foreground shows the person's
-/// colours and the rest of their region the scene's around them; the refiner keeps
-/// both histograms. Of the never-outside pixel's colour clusters, the one likeliest
-/// the scene's becomes its background if it is likelier the scene's than the
-/// person's: a scene shown only in a few frames (the person lingered, under the 15%
-/// a cluster needs to count against the person's) or hidden behind a person the
-/// first estimate took for the scene. When every cluster looks like the person the
-/// pixel keeps the first estimate and is marked unknown (a hole made mostly of
-/// unknown pixels is filled). Without person-free frames this lifted the DAVIS
-/// composites from 0.734 / 0.933 / 0.907 to 0.790 / 0.958 / 0.941, the same people
-/// over other scenes from 0.587 / 0.917 / 0.913 to 0.656 / 0.945 / 0.921, and the
-/// synthetic walk and kick from 0.733 / 0.663 to 0.977 / 0.925.
-/// Taking every unknown pixel for the person in every frame lifted lucia to 0.90
-/// but took the others below their figures here (scene that looks like the
-/// person), so unknown pixels only fill holes.
+/// Colour then checks what was learned. Where the scene is sure (one colour nearly
+/// all the clip), each frame's foreground shows the person's colours and a band
+/// around their region the scene's; the refiner keeps both histograms. A pixel
+/// never seen outside the person, or whose colour seen there looks like the
+/// person's (clothes the first estimate took for the scene, where the person stood
+/// still, so nothing was found there to exclude), takes the most scene-like of its
+/// colour clusters when that one looks like the scene: a scene shown in a few frames
+/// only (under the 15% a cluster needs to count against the clothes). A pixel never
+/// seen outside the person with no scene-like cluster keeps the first estimate and
+/// is marked unknown (a hole made mostly of unknown pixels is filled).
+///
+/// Without person-free frames this lifted the DAVIS composites from 0.734 / 0.933 /
+/// 0.907 to 0.813 / 0.958 / 0.940, the same people over other scenes from 0.587 /
+/// 0.917 / 0.913 to 0.660 / 0.944 / 0.921, and the synthetic walk and kick from
+/// 0.733 / 0.663 to 0.993 / 0.974. Taking every unknown pixel for the person in
+/// every frame lifted lucia to 0.89–0.90 but took three others down to 0.89–0.91
+/// (scenes with still people of their own), so unknown pixels only fill holes.
 pub struct Refiner {
     base: BackgroundModel,
     acc: Vec<Running>,
@@ -485,25 +486,33 @@ impl Refiner {
         let mut unknown = Mask::new(model.width, model.height);
         let w = model.width as usize;
         for (i, r) in self.acc.iter().enumerate() {
-            if r.n >= MIN_REFINE_SAMPLES {
-                model.mean[i] = r.mean;
-                model.sigma[i] = r.sigma();
-            } else if let Some(c) = &self.candidates {
-                // Never seen outside the person: the most scene-like of its colours
-                // is the scene, unless all of them look like the person.
-                let best = c.per_pixel[i]
+            let learned = (r.n >= MIN_REFINE_SAMPLES).then_some(r);
+            // The most scene-like of the pixel's colour clusters, if it looks like
+            // the scene rather than the person.
+            let scene_like = self.candidates.as_ref().and_then(|c| {
+                c.per_pixel[i]
                     .iter()
                     .filter(|c| c.n >= MIN_CANDIDATE_SAMPLES)
                     .map(|c| (odds(c.colour), c.colour))
-                    .min_by(|a, b| a.0.total_cmp(&b.0));
-                match best {
-                    Some((odds, colour)) if odds < 1.0 => {
-                        model.mean[i] = colour.map(|v| v as f32);
-                    }
-                    _ => unknown.set((i % w) as u32, (i / w) as u32, true),
+                    .min_by(|a, b| a.0.total_cmp(&b.0))
+                    .filter(|(o, _)| *o < 1.0)
+            });
+            let looks_like_scene =
+                |r: &Running| odds(r.mean.map(|v| v.round().clamp(0.0, 255.0) as u8)) < 1.0;
+            match (learned, scene_like) {
+                (Some(r), Some(_)) if looks_like_scene(r) => {
+                    model.mean[i] = r.mean;
+                    model.sigma[i] = r.sigma();
                 }
-            } else {
-                unknown.set((i % w) as u32, (i / w) as u32, true);
+                // Never seen outside the person, or what was seen looks like them
+                // (clothes the first estimate took for the scene, where the person
+                // stood still): the scene-like cluster.
+                (_, Some((_, colour))) => model.mean[i] = colour.map(|v| v as f32),
+                (Some(r), None) => {
+                    model.mean[i] = r.mean;
+                    model.sigma[i] = r.sigma();
+                }
+                (None, None) => unknown.set((i % w) as u32, (i / w) as u32, true),
             }
         }
         cap_sigma(&mut model.sigma);
