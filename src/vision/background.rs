@@ -394,15 +394,15 @@ pub struct Candidates {
 /// A cluster needs this many samples to be taken for the scene where the person
 /// always covered the pixel (one sample may be a blend at the person's edge).
 const MIN_CANDIDATE_SAMPLES: u8 = 2;
-/// A pixel whose commonest colour holds this fraction of its samples shows the
+/// A pixel whose commonest colour holds this percentage of its samples shows the
 /// scene nearly all the clip: its foreground is the person.
-const SURE_FRACTION: usize = 85;
+const SURE_PERCENT: usize = 85;
 
 /// Colour histograms of the person and of the scene just around them, learned where
 /// the scene is sure, to tell whether a colour is the person's or the scene's.
 struct ColourOdds {
-    person: Vec<u32>,
-    scene: Vec<u32>,
+    person: Vec<u64>,
+    scene: Vec<u64>,
 }
 
 /// Bins per channel of the colour histograms.
@@ -465,7 +465,7 @@ impl Refiner {
                 // Where one colour holds nearly all the clip the scene is sure: the
                 // foreground there is the person, the band around them the scene.
                 let top = c.per_pixel[i].iter().map(|c| c.n as usize).max();
-                if top.unwrap_or(0) * 100 >= c.samples * SURE_FRACTION {
+                if top.unwrap_or(0) * 100 >= c.samples * SURE_PERCENT {
                     if raw.get(x, y) {
                         self.odds.person[ColourOdds::bin(px.0)] += 1;
                     } else if around.get(x, y) && !person.get(x, y) {
