@@ -126,8 +126,9 @@ impl ClipSilhouettes {
                     "the silhouettes are nearly empty (median {:.2}% of the image): the clip \
                      has no person-free frames and the person seems to stay on the same spot, \
                      so they were taken for the scene; name the clip's person-free frames \
-                     (--empty-frames A..B), film a few seconds of the empty scene before the \
-                     person steps in, or give the silhouettes as a mask clip",
+                     (--empty-frames A..B; the job option empty_frames), film a few seconds \
+                     of the empty scene before the person steps in, or give the silhouettes \
+                     as a mask clip",
                     100.0 * self.median_foreground
                 ))
             }
