@@ -301,21 +301,7 @@ fn a_person_who_never_moves_without_person_free_frames_gets_a_warning() {
     // background learned from the clip is the person, and the silhouettes are empty.
     let dir = TempDir::new("still");
     let moving = dir.path("moving.zip");
-    assert_success("synth", &synth(&moving, &["--style", "color"]));
-    let mut frame = Vec::new();
-    let mut zip = zip::ZipArchive::new(std::fs::File::open(&moving).unwrap()).unwrap();
-    std::io::Read::read_to_end(&mut zip.by_name("000010.png").unwrap(), &mut frame).unwrap();
-    let still = dir.path("still.zip");
-    let mut w = zip::ZipWriter::new(std::fs::File::create(&still).unwrap());
-    for i in 0..12 {
-        w.start_file(
-            format!("{i:06}.png"),
-            zip::write::SimpleFileOptions::default(),
-        )
-        .unwrap();
-        std::io::Write::write_all(&mut w, &frame).unwrap();
-    }
-    w.finish().unwrap();
+    let still = dir.write("still.zip", &common::still_person_clip(&moving));
     let out = monocap(&["silhouettes", s(&still), "-o", s(&dir.path("m.zip"))]);
     assert_success("silhouettes", &out);
     let stderr = String::from_utf8_lossy(&out.stderr);

@@ -1994,32 +1994,7 @@ fn a_job_runs_on_postgres() {
 #[test]
 fn a_still_person_fails_with_the_reason() {
     let dir = TempDir::new("svc-still");
-    let moving = dir.path("moving.zip");
-    let out = monocap(&[
-        "synth",
-        "--bvh",
-        "tests/fixtures/bandai_run_normal_001_20f.bvh",
-        "--out",
-        common::s(&moving),
-    ]);
-    assert!(out.status.success(), "synth: {out:?}");
-    let mut frame = Vec::new();
-    let mut zip = zip::ZipArchive::new(std::fs::File::open(&moving).unwrap()).unwrap();
-    zip.by_name("000010.png")
-        .unwrap()
-        .read_to_end(&mut frame)
-        .unwrap();
-    let mut still = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
-    for i in 0..12 {
-        still
-            .start_file(
-                format!("{i:06}.png"),
-                zip::write::SimpleFileOptions::default(),
-            )
-            .unwrap();
-        still.write_all(&frame).unwrap();
-    }
-    let still = still.finish().unwrap().into_inner();
+    let still = common::still_person_clip(&dir.path("moving.zip"));
 
     let svc = Svc::start("svc-still", &[]);
     let api = svc.api(None);

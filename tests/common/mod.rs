@@ -73,3 +73,33 @@ pub fn monocap(args: &[&str]) -> Output {
 pub fn s(p: &Path) -> &str {
     p.to_str().unwrap()
 }
+
+/// A colour clip of a person who never moves and no person-free frame: frame 10 of
+/// a clip synthesised from the fixture capture (written to `moving`), repeated 12
+/// times, as the bytes of a ZIP of PNG frames.
+pub fn still_person_clip(moving: &Path) -> Vec<u8> {
+    let out = monocap(&[
+        "synth",
+        "--bvh",
+        "tests/fixtures/bandai_run_normal_001_20f.bvh",
+        "--out",
+        s(moving),
+        "--style",
+        "color",
+    ]);
+    assert!(out.status.success(), "synth: {out:?}");
+    let mut frame = Vec::new();
+    let mut zip = zip::ZipArchive::new(fs::File::open(moving).unwrap()).unwrap();
+    std::io::Read::read_to_end(&mut zip.by_name("000010.png").unwrap(), &mut frame).unwrap();
+    let mut still = zip::ZipWriter::new(std::io::Cursor::new(Vec::new()));
+    for i in 0..12 {
+        still
+            .start_file(
+                format!("{i:06}.png"),
+                zip::write::SimpleFileOptions::default(),
+            )
+            .unwrap();
+        std::io::Write::write_all(&mut still, &frame).unwrap();
+    }
+    still.finish().unwrap().into_inner()
+}
