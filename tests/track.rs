@@ -402,3 +402,39 @@ fn a_person_who_comes_back_elsewhere_is_found_again() {
     let mean = back.iter().sum::<f64>() / back.len() as f64;
     assert!(mean >= 0.6, "mean IoU after coming back {mean:.3}");
 }
+
+/// A model that starts nearer than the person (the state a slow drift leaves it in)
+/// is moved back to the person's depth on the next frame: its size in the image
+/// says where it belongs, farther than the search box reaches in one frame.
+#[test]
+fn a_model_nearer_than_the_person_is_put_back_at_their_depth() {
+    let (masks, truth, opts) = run_masks();
+    let (w, h) = (opts.width, opts.height);
+    let mut shape = [0.0; 12];
+    shape.copy_from_slice(&truth.shape.values);
+    let mut pose = [0.0; 30];
+    pose.copy_from_slice(&truth.frames[0].params);
+    for v in &mut pose[..3] {
+        *v *= 0.85;
+    }
+    let o = TrackOptions {
+        init_frame: Some(0),
+        initial: Some((shape, pose)),
+        ..TrackOptions::default()
+    };
+    let tracker = Tracker::new(Camera::new(w, h, opts.fov_deg), o);
+    let track = tracker
+        .track(inputs(&masks[..3]), Some(3), |_, _| {
+            ControlFlow::Continue(())
+        })
+        .unwrap();
+    let depth = |p: &[f64]| -p[2];
+    for k in 1..3 {
+        let (got, want) = (depth(&track.frames[k].pose), depth(&truth.frames[k].params));
+        println!("frame {k}: depth {got:.0} cm, the person's {want:.0} cm");
+        assert!(
+            (got - want).abs() <= 0.04 * want,
+            "frame {k}: depth {got:.0} cm, the person's {want:.0} cm"
+        );
+    }
+}

@@ -13,7 +13,8 @@
 //!   extremity candidates) and one pose per frame.
 //!
 //! Per frame: the search starts at the previous solution moved by the parameter
-//! velocity (when that is not worse than the previous solution itself), or at a
+//! velocity (when that is not worse than the previous solution itself; and moved
+//! along its viewing ray to the person's size when that is better still), or at a
 //! keyframe's interpolation; the search box around it is bounded by per-parameter
 //! acceleration limits, and the simplex's vertex offsets are the parameters' length
 //! scales, capped by that box. The groups are searched one after another (global,
@@ -39,6 +40,10 @@ use crate::vision::features::{compute, FeatureOptions, FrameFeatures};
 
 /// A silhouette lower than this many pixels is not a person (noise, a speck).
 const MIN_PERSON_HEIGHT: f64 = 8.0;
+
+/// Largest change of depth, as a factor, when a frame's start is resized to the
+/// person ([`Search::resize_over`]).
+const MAX_RESIZE: f64 = 1.25;
 
 /// Frames tracked from each initial candidate to choose between them.
 const HYPOTHESIS_FRAMES: usize = 15;
@@ -721,6 +726,20 @@ impl<'a> Search<'a> {
                 best_f = f_prev;
             }
         }
+        // Or from the start moved along its viewing ray to the person's size, when
+        // that explains the frame better: a model that has crept nearer or farther
+        // than the person (an approach over many frames costs little per frame, as
+        // the edge and region rewards pay for covering the person with a larger
+        // body) is put back at their depth before the search.
+        if !keyframe {
+            let mut sized = start;
+            self.resize_over(&mut ev, target, &mut sized);
+            let f_sized = ev.cost(&sized);
+            if f_sized < best_f {
+                start = sized;
+                best_f = f_sized;
+            }
+        }
         // The reach of the search: acceleration limits around the prediction.
         let scale = (30.0 / opts.fps.max(1.0)).powi(2);
         let mut lo = [0.0; MOTION_COUNT];
@@ -748,6 +767,27 @@ impl<'a> Search<'a> {
             iou: Some(iou),
             keyframe,
         }
+    }
+
+    /// Moves the root along its viewing ray (by at most [`MAX_RESIZE`] either way)
+    /// so that the model's silhouette is as tall as the person's, then centres it
+    /// over them.
+    fn resize_over(&self, ev: &mut Evaluator, target: &Target, pose: &mut Pose) {
+        let cam = &self.tracker.camera;
+        let mut m = Mask::new(cam.width, cam.height);
+        ev.render(pose, &mut m);
+        let (Some(a), Some(b)) = (mask_bbox(&m), mask_bbox(&target.silhouette)) else {
+            return;
+        };
+        let model_h = (a[3] - a[1] + 1) as f64;
+        let person_h = (b[3] - b[1] + 1) as f64;
+        // Scaling the root's camera coordinates keeps its pixel and scales the
+        // model's image by the inverse.
+        let k = (model_h / person_h).clamp(1.0 / MAX_RESIZE, MAX_RESIZE);
+        for v in &mut pose[ix::ROOT_TX..=ix::ROOT_TZ] {
+            *v *= k;
+        }
+        self.replace_over(target, pose);
     }
 
     /// Shifts the root in the image plane so that the model's silhouette box is
