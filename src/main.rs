@@ -213,6 +213,10 @@ struct BenchArgs {
     /// Start from the true shape and pose (measures tracking apart from initialisation).
     #[arg(long)]
     oracle_init: bool,
+    /// Also write every frame's figures to this CSV file (PCK, PA-MPJPE, IoU, cost,
+    /// heading error, depth ratio).
+    #[arg(long, value_name = "CSV")]
+    per_frame: Option<PathBuf>,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -517,6 +521,17 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     };
     opts.track.restarts = a.restarts;
     a.weights.apply(&mut opts.track.weights)?;
+    let mut per_frame = match &a.per_frame {
+        Some(path) => {
+            let mut f = BufWriter::new(
+                std::fs::File::create(path)
+                    .with_context(|| format!("cannot create {}", path.display()))?,
+            );
+            writeln!(f, "{}", bench::FrameReport::CSV_HEADER)?;
+            Some(f)
+        }
+        None => None,
+    };
     println!(
         "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>7} {:>6}",
         "clip",
@@ -534,7 +549,15 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     let mut all = Accumulator::default();
     let mut fps = Vec::new();
     let mut lost = 0;
+    let mut write_error = None;
     let reports = bench::run(&opts, |r| {
+        if let Some(f) = per_frame.as_mut() {
+            for fr in &r.frames {
+                if let Err(e) = writeln!(f, "{}", fr.csv_row(&r.name)) {
+                    write_error.get_or_insert(e);
+                }
+            }
+        }
         println!(
             "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>7.1} {:>5.0}%",
             r.name,
@@ -569,6 +592,13 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         lost,
         fps[fps.len() / 2]
     );
+    if let (Some(path), Some(mut f)) = (&a.per_frame, per_frame) {
+        if let Some(e) = write_error {
+            return Err(e).with_context(|| format!("writing {}", path.display()));
+        }
+        f.flush()
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
     Ok(())
 }
 

@@ -347,3 +347,59 @@ fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
         "run past the clip",
     );
 }
+
+/// `bench --per-frame` writes one CSV row per frame with a person, after a header,
+/// for every clip it prints; a path it cannot create is one clear line.
+#[test]
+fn bench_writes_its_per_frame_figures() {
+    let dir = TempDir::new("cli-bench");
+    let mocap = dir.path("mocap");
+    std::fs::create_dir_all(&mocap).unwrap();
+    std::fs::copy(FIXTURE, mocap.join("run.bvh")).unwrap();
+    let csv = dir.path("frames.csv");
+    let bench = |csv: &Path| {
+        monocap(&[
+            "bench",
+            "--mocap",
+            s(&mocap),
+            "--azimuths",
+            "0",
+            "--lead-in",
+            "0,3",
+            "--duration-s",
+            "0.3",
+            "--restarts",
+            "1",
+            "--per-frame",
+            s(csv),
+        ])
+    };
+    let out = bench(&csv);
+    assert_success("bench", &out);
+    let text = std::fs::read_to_string(&csv).unwrap();
+    let mut lines = text.lines();
+    assert_eq!(
+        lines.next(),
+        Some("clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,heading_error_deg,depth_ratio")
+    );
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert!(rows.iter().all(|r| r.len() == 9), "{text}");
+    // Each clip's printed frame count is its number of rows.
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    for lead in ["lead 0", "lead 3"] {
+        let printed: usize = stdout
+            .lines()
+            .find_map(|l| l.split(lead).nth(1))
+            .and_then(|rest| rest.split_whitespace().next())
+            .and_then(|n| n.parse().ok())
+            .unwrap_or_else(|| panic!("no {lead} line in {stdout}"));
+        let written = rows.iter().filter(|r| r[0].ends_with(lead)).count();
+        assert_eq!((printed, written > 0), (written, true), "{lead}");
+        // With a lead-in the frames counted are those with the person.
+        if lead == "lead 3" {
+            assert_eq!(rows.iter().find(|r| r[0].ends_with(lead)).unwrap()[1], "3");
+        }
+    }
+    let out = bench(&dir.path("missing/frames.csv"));
+    assert_fails_with("bench to a missing folder", &out, "cannot create");
+}

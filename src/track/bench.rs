@@ -22,6 +22,7 @@ use image::RgbImage;
 
 use super::metrics::{self, Accumulator};
 use super::tracker::{FrameInput, TrackOptions, Tracker};
+use crate::body::params::ix;
 use crate::body::skeleton::Joint;
 use crate::body::{Body, Camera, Mask};
 use crate::clip::write::Frame;
@@ -104,6 +105,47 @@ pub struct ClipReport {
     /// Share of the tracking time spent in the search (the rest: features).
     pub search_share: f64,
     pub evals_per_frame: f64,
+    /// Each frame with a person, in order.
+    pub frames: Vec<FrameReport>,
+}
+
+/// One frame's figures (`monocap bench --per-frame`): where a clip goes wrong, and
+/// how (the heading and depth errors show a body turned the wrong way or drifted
+/// nearer or farther than the person).
+#[derive(Clone, Debug)]
+pub struct FrameReport {
+    pub index: usize,
+    pub pck: f64,
+    pub pck_swapped: f64,
+    pub pa_mpjpe_mm: f64,
+    pub iou: f64,
+    /// The tracker's cost (None where it found no person).
+    pub cost: Option<f64>,
+    /// The model's heading (root y rotation) minus the truth's, in (−180°, 180°].
+    pub heading_error_deg: f64,
+    /// The model's root depth over the truth's.
+    pub depth_ratio: f64,
+}
+
+impl FrameReport {
+    /// The header of [`FrameReport::csv_row`].
+    pub const CSV_HEADER: &'static str =
+        "clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,heading_error_deg,depth_ratio";
+
+    /// One CSV line (no newline) for the clip `clip`.
+    pub fn csv_row(&self, clip: &str) -> String {
+        format!(
+            "{clip},{},{:.3},{:.3},{:.1},{:.4},{},{:.1},{:.4}",
+            self.index,
+            self.pck,
+            self.pck_swapped,
+            self.pa_mpjpe_mm,
+            self.iou,
+            self.cost.map_or(String::new(), |c| format!("{c:.1}")),
+            self.heading_error_deg,
+            self.depth_ratio
+        )
+    }
 }
 
 /// Runs the benchmark, handing each clip's report to `each` as it finishes.
@@ -238,6 +280,7 @@ pub fn run_clip(
         track_fps: n as f64 / secs.max(1e-9),
         search_share: track.timing.search / (track.timing.search + track.timing.features).max(1e-9),
         evals_per_frame: track.timing.evals as f64 / n as f64,
+        frames: Vec::new(),
     };
     for tf in &truth.frames {
         let f = &track.frames[tf.index];
@@ -266,6 +309,17 @@ pub fn run_clip(
             report.lost += 1;
         }
         report.acc.add_frame(&plain, &swapped, pa, iou);
+        let heading = f.pose[ix::ROOT_RY] - tf.params[ix::ROOT_RY];
+        report.frames.push(FrameReport {
+            index: tf.index,
+            pck: plain.pck(),
+            pck_swapped: swapped.pck(),
+            pa_mpjpe_mm: pa,
+            iou,
+            cost: f.cost,
+            heading_error_deg: 180.0 - (180.0 - heading).rem_euclid(360.0),
+            depth_ratio: f.pose[ix::ROOT_TZ] / tf.params[ix::ROOT_TZ],
+        });
     }
     Ok(report)
 }
