@@ -693,11 +693,12 @@ impl<'a> Search<'a> {
             };
         };
         let opts = &self.tracker.opts;
+        let mut ev = self.evaluator(target);
         let mut prev = history.last;
         if history.away {
             // Back after frames without a person, maybe elsewhere: move the body over
             // the silhouette (same depth) before searching around it.
-            self.replace_over(target, &mut prev);
+            self.replace_over(&mut ev, target, &mut prev);
         }
         let mut predicted = prev;
         if let Some(before) = history.before {
@@ -714,7 +715,6 @@ impl<'a> Search<'a> {
                 fixed[k] = true;
             }
         }
-        let mut ev = self.evaluator(target);
         // Start from the prediction unless the plain previous pose explains the
         // frame better (a velocity estimate can be wrong).
         let mut start = keyed;
@@ -773,10 +773,7 @@ impl<'a> Search<'a> {
     /// so that the model's silhouette is as tall as the person's, then centres it
     /// over them.
     fn resize_over(&self, ev: &mut Evaluator, target: &Target, pose: &mut Pose) {
-        let cam = &self.tracker.camera;
-        let mut m = Mask::new(cam.width, cam.height);
-        ev.render(pose, &mut m);
-        let (Some(a), Some(b)) = (mask_bbox(&m), mask_bbox(&target.silhouette)) else {
+        let Some((a, b)) = self.boxes(ev, target, pose) else {
             return;
         };
         let model_h = (a[3] - a[1] + 1) as f64;
@@ -787,16 +784,27 @@ impl<'a> Search<'a> {
         for v in &mut pose[ix::ROOT_TX..=ix::ROOT_TZ] {
             *v *= k;
         }
-        self.replace_over(target, pose);
+        self.replace_over(ev, target, pose);
+    }
+
+    /// The bounding boxes of the model's silhouette at `pose` and of the person.
+    fn boxes(
+        &self,
+        ev: &mut Evaluator,
+        target: &Target,
+        pose: &Pose,
+    ) -> Option<([u32; 4], [u32; 4])> {
+        let cam = &self.tracker.camera;
+        let mut m = Mask::new(cam.width, cam.height);
+        ev.render(pose, &mut m);
+        Some((mask_bbox(&m)?, mask_bbox(&target.silhouette)?))
     }
 
     /// Shifts the root in the image plane so that the model's silhouette box is
     /// centred on the person's.
-    fn replace_over(&self, target: &Target, pose: &mut Pose) {
+    fn replace_over(&self, ev: &mut Evaluator, target: &Target, pose: &mut Pose) {
         let cam = &self.tracker.camera;
-        let mut m = Mask::new(cam.width, cam.height);
-        self.evaluator(target).render(pose, &mut m);
-        let (Some(a), Some(b)) = (mask_bbox(&m), mask_bbox(&target.silhouette)) else {
+        let Some((a, b)) = self.boxes(ev, target, pose) else {
             return;
         };
         let centre = |b: [u32; 4]| [(b[0] + b[2]) as f64 / 2.0, (b[1] + b[3]) as f64 / 2.0];

@@ -607,15 +607,22 @@ fn dominant_scene(
 fn cap_sigma(sigma: &mut [[f32; 3]]) {
     for c in 0..3 {
         let mut v: Vec<f32> = sigma.iter().map(|s| s[c]).collect();
-        if v.is_empty() {
+        let Some(median) = median(&mut v) else {
             return;
-        }
-        let mid = v.len() / 2;
-        let median = *v.select_nth_unstable_by(mid, f32::total_cmp).1;
+        };
         for s in sigma.iter_mut() {
             s[c] = s[c].min(SIGMA_CAP * median);
         }
     }
+}
+
+/// The median of `v` (the upper one of an even count; None when empty). Reorders `v`.
+pub(crate) fn median(v: &mut [f32]) -> Option<f32> {
+    if v.is_empty() {
+        return None;
+    }
+    let mid = v.len() / 2;
+    Some(*v.select_nth_unstable_by(mid, f32::total_cmp).1)
 }
 
 fn linf(a: &[f32; 3], b: &[f32; 3]) -> f32 {

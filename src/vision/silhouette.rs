@@ -138,12 +138,8 @@ impl ClipSilhouettes {
 }
 
 /// The median of a list of shares (0 when empty).
-fn median(mut v: Vec<f32>) -> f64 {
-    if v.is_empty() {
-        return 0.0;
-    }
-    let mid = v.len() / 2;
-    *v.select_nth_unstable_by(mid, f32::total_cmp).1 as f64
+fn median_share(mut v: Vec<f32>) -> f64 {
+    super::background::median(&mut v).unwrap_or(0.0) as f64
 }
 
 /// The silhouette of every frame of the clip at `path`, handed to `each` with the
@@ -205,7 +201,7 @@ pub fn clip_silhouettes(
             info,
             source: None,
             frames,
-            median_foreground: median(shares),
+            median_foreground: median_share(shares),
         });
     }
     let seg = Segmenter::learn(w, h, opts, |visit| {
@@ -229,6 +225,6 @@ pub fn clip_silhouettes(
         info,
         source: Some(seg.model.source.clone()),
         frames,
-        median_foreground: median(shares),
+        median_foreground: median_share(shares),
     })
 }
