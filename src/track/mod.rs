@@ -1,6 +1,7 @@
 //! The tracker (method.md §4–§5): fit the body model to every frame's silhouette.
 
 pub mod bench;
+pub mod flips;
 pub mod keyframes;
 pub mod metrics;
 pub mod objective;

@@ -27,6 +27,7 @@ use std::time::Instant;
 
 use image::RgbImage;
 
+use super::flips::FLIPS;
 use super::keyframes::{KeyframeError, Keyframes};
 use super::objective::{sole_height, Evaluator, Target, Weights};
 use super::simplex::{minimize, SimplexOptions};
@@ -741,11 +742,10 @@ impl<'a> Search<'a> {
             }
         }
         // The reach of the search: acceleration limits around the prediction.
-        let scale = (30.0 / opts.fps.max(1.0)).powi(2);
         let mut lo = [0.0; MOTION_COUNT];
         let mut hi = [0.0; MOTION_COUNT];
         for k in 0..MOTION_COUNT {
-            let reach = opts.reach * MOTION[k].scale * scale;
+            let reach = self.reach(k);
             lo[k] = (start[k] - reach).max(MOTION[k].lo);
             hi[k] = (start[k] + reach).min(MOTION[k].hi);
             if fixed[k] {
@@ -754,7 +754,18 @@ impl<'a> Search<'a> {
             }
         }
         let mut best = start;
-        self.hierarchical(&mut ev, &mut best, &mut best_f, &lo, &hi, opts.restarts);
+        self.hierarchical(
+            &mut ev,
+            &mut best,
+            &mut best_f,
+            &lo,
+            &hi,
+            opts.restarts,
+            opts.evals_per_param,
+        );
+        if !keyframe {
+            self.try_flips(&mut ev, &mut best, &mut best_f, &fixed);
+        }
         let iou = ev.iou(&best);
         let spent = ev.evals;
         self.evals += spent;
@@ -766,6 +777,44 @@ impl<'a> Search<'a> {
             cost: Some(best_f),
             iou: Some(iou),
             keyframe,
+        }
+    }
+
+    /// How far parameter `k` may move in one frame: the acceleration limit
+    /// (`reach` length scales at 30 frames/s, scaled by the squared frame time).
+    fn reach(&self, k: usize) -> f64 {
+        let opts = &self.tracker.opts;
+        let scale = (30.0 / opts.fps.max(1.0)).powi(2);
+        opts.reach * MOTION[k].scale * scale
+    }
+
+    /// Tries every depth flip of `best` ([`FLIPS`]): each is refined by one pass of
+    /// the search over its groups within the acceleration reach around it (half the
+    /// budget of the frame's own search: it starts near its answer), and kept when
+    /// it explains the frame better.
+    fn try_flips(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64, fixed: &[bool]) {
+        let opts = &self.tracker.opts;
+        for flip in &FLIPS {
+            let params = flip.params();
+            if params.iter().any(|&k| fixed[k]) {
+                continue;
+            }
+            let Some(mut pose) = flip.apply(self.body, best) else {
+                continue;
+            };
+            let mut f = ev.cost(&pose);
+            let mut lo = *best;
+            let mut hi = *best;
+            for &k in &params {
+                let reach = self.reach(k);
+                lo[k] = (pose[k] - reach).max(MOTION[k].lo);
+                hi[k] = (pose[k] + reach).min(MOTION[k].hi);
+            }
+            self.hierarchical(ev, &mut pose, &mut f, &lo, &hi, 1, opts.evals_per_param / 2);
+            if f < *best_f {
+                *best_f = f;
+                *best = pose;
+            }
         }
     }
 
@@ -816,8 +865,10 @@ impl<'a> Search<'a> {
         }
     }
 
-    /// `runs` passes of the group-by-group search within [lo, hi]; returns the
+    /// `runs` passes of the group-by-group search within [lo, hi], each simplex
+    /// allowed `evals_per_param` evaluations per parameter (plus one); returns the
     /// evaluations spent.
+    #[allow(clippy::too_many_arguments)]
     fn hierarchical(
         &self,
         ev: &mut Evaluator,
@@ -826,6 +877,7 @@ impl<'a> Search<'a> {
         lo: &Pose,
         hi: &Pose,
         runs: usize,
+        evals_per_param: usize,
     ) -> u64 {
         let opts = &self.tracker.opts;
         let before = ev.evals;
@@ -836,7 +888,7 @@ impl<'a> Search<'a> {
         for _ in 0..runs.max(1) {
             for g in order {
                 let params: Vec<usize> = g.range().filter(|&k| lo[k] < hi[k]).collect();
-                let budget = opts.evals_per_param * (params.len() + 1);
+                let budget = evals_per_param * (params.len() + 1);
                 self.simplex_over(ev, best, best_f, &params, lo, hi, budget);
             }
         }
@@ -909,7 +961,8 @@ impl<'a> Search<'a> {
         let mut best = start;
         let mut best_f = ev.cost(&start);
         limb_grid(&mut ev, &mut best, &mut best_f);
-        self.hierarchical(&mut ev, &mut best, &mut best_f, &lo, &hi, runs);
+        let per_param = self.tracker.opts.evals_per_param;
+        self.hierarchical(&mut ev, &mut best, &mut best_f, &lo, &hi, runs, per_param);
         (best, best_f)
     }
 }

@@ -1,0 +1,435 @@
+//! Depth flips (kinematic jumps): one camera cannot tell whether a bone points
+//! towards it or away from it. Moving a bone's far end along its line of sight to
+//! the other point at the bone's length from its near end gives a pose seen almost
+//! exactly as before but with a very different 3D configuration, out of the local
+//! search's reach from the first. A tracker that took the wrong branch when a limb
+//! or the trunk started to bend (both look alike while the bend is small) stays on
+//! it; the tracker therefore also tries each flip of its result, refines it, and
+//! keeps it when it explains the frame better.
+//!
+//! A flip is turned into joint angles by inverse kinematics: the angles of the
+//! flipped bone and of the bones it carries (which keep their own lines of sight)
+//! are fitted, by the downhill simplex on positions alone (no rendering), to the
+//! moved landmarks, the rest of the body held where it is. Joint limits may keep a
+//! flip from being reached exactly (a trunk bends back less far than forwards); the
+//! search on the frame then decides.
+
+use nalgebra::Point3;
+
+use super::simplex::{minimize, SimplexOptions};
+use crate::body::params::{ix, Group, Pose, MOTION};
+use crate::body::skeleton::{Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
+use crate::body::Body;
+
+/// One flip: the bones it moves, each (end, its parent, flipped or kept), parents
+/// first; the groups whose angles are refitted; the angle mirrored in the inverse
+/// kinematics' second start.
+pub struct Flip {
+    pub name: &'static str,
+    bones: &'static [(usize, usize, bool)],
+    pub groups: &'static [Group],
+    mirror: usize,
+}
+
+const fn j(joint: Joint) -> usize {
+    joint as usize
+}
+
+const fn t(tip: Tip) -> usize {
+    JOINT_COUNT + tip as usize
+}
+
+use Joint as J;
+
+const NECK: usize = j(J::Neck);
+const HEAD: usize = j(J::Head);
+const HEAD_TOP: usize = t(Tip::HeadTop);
+
+/// An arm's bones below the shoulder: (upper arm flipped, forearm flipped).
+macro_rules! arm {
+    ($s:ident, $e:ident, $h:ident, $tip:ident, $up:expr, $low:expr) => {
+        &[
+            (j(J::$e), j(J::$s), $up),
+            (j(J::$h), j(J::$e), $low),
+            (t(Tip::$tip), j(J::$h), false),
+        ]
+    };
+}
+
+/// A leg's bones below the hip: (thigh flipped, shin flipped).
+macro_rules! leg {
+    ($hip:ident, $k:ident, $a:ident, $toe:ident, $tip:ident, $up:expr, $low:expr) => {
+        &[
+            (j(J::$k), j(J::$hip), $up),
+            (j(J::$a), j(J::$k), $low),
+            (j(J::$toe), j(J::$a), false),
+            (t(Tip::$tip), j(J::$toe), false),
+        ]
+    };
+}
+
+/// The flips tried: the trunk, the head, and each limb's upper bone, lower bone and
+/// both.
+pub const FLIPS: [Flip; 14] = [
+    Flip {
+        name: "spine",
+        bones: &[
+            (NECK, j(J::Spine), true),
+            (j(J::LeftArm), j(J::Spine), true),
+            (j(J::RightArm), j(J::Spine), true),
+            (HEAD, NECK, false),
+            (HEAD_TOP, HEAD, false),
+            (j(J::LeftForeArm), j(J::LeftArm), false),
+            (j(J::LeftHand), j(J::LeftForeArm), false),
+            (t(Tip::LeftHandTip), j(J::LeftHand), false),
+            (j(J::RightForeArm), j(J::RightArm), false),
+            (j(J::RightHand), j(J::RightForeArm), false),
+            (t(Tip::RightHandTip), j(J::RightHand), false),
+        ],
+        groups: &[Group::Torso, Group::LeftArm, Group::RightArm],
+        mirror: ix::SPINE,
+    },
+    Flip {
+        name: "neck",
+        bones: &[(HEAD, NECK, true), (HEAD_TOP, HEAD, true)],
+        groups: &[Group::Torso],
+        mirror: ix::NECK,
+    },
+    Flip {
+        name: "left upper arm",
+        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, true, false),
+        groups: &[Group::LeftArm],
+        mirror: ix::L_SHOULDER,
+    },
+    Flip {
+        name: "left forearm",
+        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, false, true),
+        groups: &[Group::LeftArm],
+        mirror: ix::L_SHOULDER,
+    },
+    Flip {
+        name: "left arm",
+        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, true, true),
+        groups: &[Group::LeftArm],
+        mirror: ix::L_SHOULDER,
+    },
+    Flip {
+        name: "right upper arm",
+        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, true, false),
+        groups: &[Group::RightArm],
+        mirror: ix::R_SHOULDER,
+    },
+    Flip {
+        name: "right forearm",
+        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, false, true),
+        groups: &[Group::RightArm],
+        mirror: ix::R_SHOULDER,
+    },
+    Flip {
+        name: "right arm",
+        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, true, true),
+        groups: &[Group::RightArm],
+        mirror: ix::R_SHOULDER,
+    },
+    Flip {
+        name: "left thigh",
+        bones: leg!(
+            LeftUpLeg,
+            LeftLeg,
+            LeftFoot,
+            LeftToeBase,
+            LeftToeTip,
+            true,
+            false
+        ),
+        groups: &[Group::LeftLeg],
+        mirror: ix::L_HIP,
+    },
+    Flip {
+        name: "left shin",
+        bones: leg!(
+            LeftUpLeg,
+            LeftLeg,
+            LeftFoot,
+            LeftToeBase,
+            LeftToeTip,
+            false,
+            true
+        ),
+        groups: &[Group::LeftLeg],
+        mirror: ix::L_HIP,
+    },
+    Flip {
+        name: "left leg",
+        bones: leg!(
+            LeftUpLeg,
+            LeftLeg,
+            LeftFoot,
+            LeftToeBase,
+            LeftToeTip,
+            true,
+            true
+        ),
+        groups: &[Group::LeftLeg],
+        mirror: ix::L_HIP,
+    },
+    Flip {
+        name: "right thigh",
+        bones: leg!(
+            RightUpLeg,
+            RightLeg,
+            RightFoot,
+            RightToeBase,
+            RightToeTip,
+            true,
+            false
+        ),
+        groups: &[Group::RightLeg],
+        mirror: ix::R_HIP,
+    },
+    Flip {
+        name: "right shin",
+        bones: leg!(
+            RightUpLeg,
+            RightLeg,
+            RightFoot,
+            RightToeBase,
+            RightToeTip,
+            false,
+            true
+        ),
+        groups: &[Group::RightLeg],
+        mirror: ix::R_HIP,
+    },
+    Flip {
+        name: "right leg",
+        bones: leg!(
+            RightUpLeg,
+            RightLeg,
+            RightFoot,
+            RightToeBase,
+            RightToeTip,
+            true,
+            true
+        ),
+        groups: &[Group::RightLeg],
+        mirror: ix::R_HIP,
+    },
+];
+
+/// A bone whose end a flip moves less than this (cm) lies across its line of
+/// sight: it has no flip.
+const MIN_MOVE_CM: f64 = 4.0;
+
+/// Inverse kinematics closer than this (sum of squared landmark misses, cm²) to
+/// the flipped landmarks needs no second pass.
+const CLOSE_CM2: f64 = 4.0;
+
+/// The point on the camera's ray through `q` (the camera at the origin) at `r` from
+/// `p`: of the two, the one on the other side of `p`'s depth from `side` when
+/// `flip`, on the same side otherwise. The nearest point of the ray when it misses
+/// that sphere.
+fn along_ray(q: Point3<f64>, p: Point3<f64>, r: f64, side: f64, flip: bool) -> Point3<f64> {
+    let Some(dir) = q.coords.try_normalize(1e-9) else {
+        return q;
+    };
+    let mid = dir.dot(&p.coords);
+    let disc = mid * mid - (p.coords.norm_squared() - r * r);
+    let half = disc.max(0.0).sqrt();
+    let [a, b] = [mid - half, mid + half].map(|t| Point3::from(dir * t));
+    // Depth along the line of sight through p: nearer the camera is negative.
+    let sight = p.coords.normalize();
+    let depth = |x: Point3<f64>| (x - p).dot(&sight);
+    let want = if flip { -side } else { side };
+    if (depth(a) - want).abs() <= (depth(b) - want).abs() {
+        a
+    } else {
+        b
+    }
+}
+
+impl Flip {
+    /// The parameters refitted.
+    pub fn params(&self) -> Vec<usize> {
+        self.groups.iter().flat_map(|g| g.range()).collect()
+    }
+
+    /// The flipped pose of `pose` (the camera at the origin, as the body's frame is
+    /// the camera's), or `None` when a bone it flips barely moves. Each bone's end
+    /// moves along its line of sight (so it is seen where it was) to where the bone
+    /// keeps its length from its parent's new place.
+    pub fn apply(&self, body: &Body, pose: &Pose) -> Option<Pose> {
+        let now = body.posed(pose).landmarks();
+        let mut target = now;
+        for &(end, parent, flip) in self.bones {
+            let p0 = now[parent];
+            let sight = p0.coords.try_normalize(1e-9)?;
+            let side = (now[end] - p0).dot(&sight);
+            let r = (now[end] - p0).norm();
+            target[end] = along_ray(now[end], target[parent], r, side, flip);
+        }
+        // Every flipped bone must move: a composite flip one of whose bones lies
+        // across its line of sight is the other bone's flip, tried on its own.
+        let still = self
+            .bones
+            .iter()
+            .any(|&(end, _, flip)| flip && (target[end] - now[end]).norm() < MIN_MOVE_CM);
+        if still {
+            return None;
+        }
+        let params = self.params();
+        let x0: Vec<f64> = params.iter().map(|&k| pose[k]).collect();
+        let steps: Vec<f64> = params.iter().map(|&k| 4.0 * MOTION[k].scale).collect();
+        let lo: Vec<f64> = params.iter().map(|&k| MOTION[k].lo).collect();
+        let hi: Vec<f64> = params.iter().map(|&k| MOTION[k].hi).collect();
+        let base = *pose;
+        let fit = |x: &[f64]| -> Pose {
+            let mut p = base;
+            for (&k, v) in params.iter().zip(x) {
+                p[k] = *v;
+            }
+            p
+        };
+        let misfit = |x: &[f64]| -> f64 {
+            let got = body.posed(&fit(x)).landmarks();
+            (0..LANDMARK_COUNT)
+                .map(|i| (got[i] - target[i]).norm_squared())
+                .sum()
+        };
+        // Landmarks within a centimetre or so are enough: the search refines the
+        // flipped pose on the frame itself.
+        let opts = SimplexOptions {
+            max_evals: 100 * (params.len() + 1),
+            ftol: 0.0,
+            abs_tol: 0.1,
+            xtol: 0.01,
+        };
+        // The misfit is far from convex in the angles: start from the pose and from
+        // it with the first bone's flexion mirrored; a second pass (fresh steps) only
+        // when the first stopped far from the targets.
+        let mut mirrored = x0.clone();
+        if let Some(m) = params.iter().position(|&k| k == self.mirror) {
+            mirrored[m] = -mirrored[m];
+        }
+        let mut best: Option<(f64, Vec<f64>)> = None;
+        for seed in [x0, mirrored] {
+            let mut r = minimize(misfit, &seed, &steps, &lo, &hi, &opts);
+            if r.f > CLOSE_CM2 {
+                let again = minimize(misfit, &r.x, &steps, &lo, &hi, &opts);
+                if again.f < r.f {
+                    r = again;
+                }
+            }
+            if best.as_ref().is_none_or(|(f, _)| r.f < *f) {
+                best = Some((r.f, r.x));
+            }
+        }
+        best.map(|(_, x)| fit(&x))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::params::{ix, rest_pose, STANDARD_SHAPE};
+    use crate::body::skeleton::Posed;
+    use crate::body::Camera;
+
+    fn flip(name: &str) -> &'static Flip {
+        FLIPS.iter().find(|f| f.name == name).unwrap()
+    }
+
+    /// A body 3 m in front of the camera and facing it, its hips `hips` cm above
+    /// the camera, with `set` applied.
+    fn flipped(name: &str, hips: f64, set: &[(usize, f64)]) -> (Posed, Posed) {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TY] = hips;
+        pose[ix::ROOT_TZ] = -300.0;
+        for &(k, v) in set {
+            pose[k] = v;
+        }
+        let out = flip(name).apply(&body, &pose).expect("a flip");
+        (body.posed(&pose), body.posed(&out))
+    }
+
+    fn pixels_apart(a: &Point3<f64>, b: &Point3<f64>) -> f64 {
+        let cam = Camera::new(320, 240, 55.0);
+        let (pa, pb) = (cam.project(a).unwrap(), cam.project(b).unwrap());
+        ((pa[0] - pb[0]).powi(2) + (pa[1] - pb[1]).powi(2)).sqrt()
+    }
+
+    #[test]
+    fn an_arm_raised_forwards_flips_to_one_raised_backwards_seen_alike() {
+        let (a, b) = flipped("left arm", -45.0, &[(ix::L_SHOULDER, 50.0)]);
+        let hand = |p: &Posed| p.joint(Joint::LeftHand);
+        let px = pixels_apart(&hand(&a), &hand(&b));
+        assert!(px < 3.0, "the hand moved {px:.1} px in the image");
+        // In front of the shoulder (towards the camera, +z) before, behind it after.
+        let shoulder = a.joint(Joint::LeftArm).z;
+        let (before, after) = (hand(&a).z - shoulder, hand(&b).z - shoulder);
+        assert!(
+            before > 20.0 && after < -20.0,
+            "depth {before:.1} -> {after:.1}"
+        );
+        // The rest of the body has not moved.
+        assert!((a.joint(Joint::RightHand) - b.joint(Joint::RightHand)).norm() < 1e-9);
+        assert!((a.joint(Joint::LeftFoot) - b.joint(Joint::LeftFoot)).norm() < 1e-9);
+    }
+
+    #[test]
+    fn a_trunk_bent_forwards_flips_to_one_bent_backwards_with_the_arms_carried() {
+        let (a, b) = flipped("spine", -10.0, &[(ix::SPINE, 25.0)]);
+        let neck = |p: &Posed| p.joint(Joint::Neck);
+        let px = pixels_apart(&neck(&a), &neck(&b));
+        assert!(px < 3.0, "the neck moved {px:.1} px in the image");
+        let spine = a.joint(Joint::Spine).z;
+        let (before, after) = (neck(&a).z - spine, neck(&b).z - spine);
+        assert!(
+            before > 10.0 && after < -5.0,
+            "depth {before:.1} -> {after:.1}"
+        );
+        // The arms are carried: the hands are still seen about where they were.
+        let px = pixels_apart(&a.joint(Joint::LeftHand), &b.joint(Joint::LeftHand));
+        assert!(px < 4.0, "the left hand moved {px:.1} px in the image");
+    }
+
+    #[test]
+    fn flips_of_any_pose_stay_within_the_joint_limits() {
+        let body = Body::new(&STANDARD_SHAPE);
+        // A fixed pseudo-random sequence (no dependency needed for 50 poses).
+        let mut state = 0x2545_f491_4f6c_dd1d_u64;
+        let mut next = || {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            (state >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for _ in 0..50 {
+            let mut pose = rest_pose();
+            pose[ix::ROOT_TZ] = -300.0;
+            for (k, m) in MOTION.iter().enumerate().skip(3) {
+                let (lo, hi) = (m.lo.max(-180.0), m.hi.min(180.0));
+                pose[k] = lo + (hi - lo) * next();
+            }
+            for flip in &FLIPS {
+                let Some(out) = flip.apply(&body, &pose) else {
+                    continue;
+                };
+                for (k, m) in MOTION.iter().enumerate() {
+                    assert!(out[k].is_finite(), "{}: {} not finite", flip.name, m.name);
+                    assert!(
+                        (m.lo..=m.hi).contains(&out[k]),
+                        "{}: {} = {} outside its limits",
+                        flip.name,
+                        m.name,
+                        out[k]
+                    );
+                    if !flip.params().contains(&k) {
+                        assert_eq!(out[k], pose[k], "{} changed {}", flip.name, m.name);
+                    }
+                }
+            }
+        }
+    }
+}
