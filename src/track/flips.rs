@@ -13,6 +13,11 @@
 //! moved landmarks, the rest of the body held where it is. Joint limits may keep a
 //! flip from being reached exactly (a trunk bends back less far than forwards); the
 //! search on the frame then decides.
+//!
+//! One more jump of the same kind is not a flip: a small bow and a nod of the head
+//! look alike from the front, and a tracker that put the bend into the neck stays
+//! there. [`nod_into_trunk`] straightens the neck and refits the trunk and arms so
+//! that the head and hands stay where they are.
 
 use nalgebra::Point3;
 
@@ -279,53 +284,130 @@ impl Flip {
         }
         let params = self.params();
         let x0: Vec<f64> = params.iter().map(|&k| pose[k]).collect();
-        let steps: Vec<f64> = params.iter().map(|&k| 4.0 * MOTION[k].scale).collect();
-        let lo: Vec<f64> = params.iter().map(|&k| MOTION[k].lo).collect();
-        let hi: Vec<f64> = params.iter().map(|&k| MOTION[k].hi).collect();
-        let base = *pose;
-        let fit = |x: &[f64]| -> Pose {
-            let mut p = base;
-            for (&k, v) in params.iter().zip(x) {
-                p[k] = *v;
-            }
-            p
-        };
-        let misfit = |x: &[f64]| -> f64 {
-            let got = body.posed(&fit(x)).landmarks();
-            (0..LANDMARK_COUNT)
-                .map(|i| (got[i] - target[i]).norm_squared())
-                .sum()
-        };
-        // Landmarks within a centimetre or so are enough: the search refines the
-        // flipped pose on the frame itself.
-        let opts = SimplexOptions {
-            max_evals: 100 * (params.len() + 1),
-            ftol: 0.0,
-            abs_tol: 0.1,
-            xtol: 0.01,
-        };
         // The misfit is far from convex in the angles: start from the pose and from
-        // it with the first bone's flexion mirrored; a second pass (fresh steps) only
-        // when the first stopped far from the targets.
+        // it with the first bone's flexion mirrored.
         let mut mirrored = x0.clone();
         if let Some(m) = params.iter().position(|&k| k == self.mirror) {
             mirrored[m] = -mirrored[m];
         }
-        let mut best: Option<(f64, Vec<f64>)> = None;
-        for seed in [x0, mirrored] {
-            let mut r = minimize(misfit, &seed, &steps, &lo, &hi, &opts);
-            if r.f > CLOSE_CM2 {
-                let again = minimize(misfit, &r.x, &steps, &lo, &hi, &opts);
-                if again.f < r.f {
-                    r = again;
-                }
-            }
-            if best.as_ref().is_none_or(|(f, _)| r.f < *f) {
-                best = Some((r.f, r.x));
+        Some(fit_landmarks(body, pose, &params, &target, [x0, mirrored]))
+    }
+}
+
+/// A nod of the head larger than this (degrees) is also tried as a bend of the
+/// trunk.
+const MIN_NOD_DEG: f64 = 5.0;
+
+/// The head's nod moved into the trunk: the neck straightened (its forward angle
+/// to zero) and the trunk and arms refitted so that the head, hands and the rest
+/// stay where they are. From the front, a bow and a nod of the head look alike
+/// while they are small; a tracker that put the bend into the neck stays there.
+/// `None` when the head barely nods.
+pub fn nod_into_trunk(body: &Body, pose: &Pose) -> Option<Pose> {
+    if pose[ix::NECK].abs() < MIN_NOD_DEG {
+        return None;
+    }
+    let target = body.posed(pose).landmarks();
+    let mut base = *pose;
+    base[ix::NECK] = 0.0;
+    // The neck's other angles (tilt, turn) stay as they are.
+    let params: Vec<usize> = Jump::NodIntoTrunk
+        .params()
+        .into_iter()
+        .filter(|k| !(ix::NECK..ix::NECK + 3).contains(k))
+        .collect();
+    let x0: Vec<f64> = params.iter().map(|&k| base[k]).collect();
+    let mut bent = x0.clone();
+    bent[0] = (bent[0] + pose[ix::NECK]).clamp(MOTION[ix::SPINE].lo, MOTION[ix::SPINE].hi);
+    Some(fit_landmarks(body, &base, &params, &target, [bent, x0]))
+}
+
+/// The groups [`nod_into_trunk`] refits.
+const NOD_GROUPS: [Group; 3] = [Group::Torso, Group::LeftArm, Group::RightArm];
+
+/// A jump the tracker tries from each frame's result: a depth flip, or the head's
+/// nod moved into the trunk.
+#[derive(Clone, Copy)]
+pub enum Jump {
+    Flip(&'static Flip),
+    NodIntoTrunk,
+}
+
+impl Jump {
+    /// Every jump: the flips, then the nod.
+    pub fn all() -> impl Iterator<Item = Jump> {
+        FLIPS
+            .iter()
+            .map(Jump::Flip)
+            .chain(std::iter::once(Jump::NodIntoTrunk))
+    }
+
+    /// The parameters the jump changes (and the search then refines).
+    pub fn params(self) -> Vec<usize> {
+        match self {
+            Jump::Flip(f) => f.params(),
+            Jump::NodIntoTrunk => NOD_GROUPS.iter().flat_map(|g| g.range()).collect(),
+        }
+    }
+
+    /// The pose after the jump, `None` when it would barely move anything.
+    pub fn apply(self, body: &Body, pose: &Pose) -> Option<Pose> {
+        match self {
+            Jump::Flip(f) => f.apply(body, pose),
+            Jump::NodIntoTrunk => nod_into_trunk(body, pose),
+        }
+    }
+}
+
+/// `pose` with `params` fitted by inverse kinematics to the landmarks `target`,
+/// from each of `seeds` (values of `params`); the best fit.
+fn fit_landmarks<const N: usize>(
+    body: &Body,
+    pose: &Pose,
+    params: &[usize],
+    target: &[Point3<f64>; LANDMARK_COUNT],
+    seeds: [Vec<f64>; N],
+) -> Pose {
+    let steps: Vec<f64> = params.iter().map(|&k| 4.0 * MOTION[k].scale).collect();
+    let lo: Vec<f64> = params.iter().map(|&k| MOTION[k].lo).collect();
+    let hi: Vec<f64> = params.iter().map(|&k| MOTION[k].hi).collect();
+    let base = *pose;
+    let fit = |x: &[f64]| -> Pose {
+        let mut p = base;
+        for (&k, v) in params.iter().zip(x) {
+            p[k] = *v;
+        }
+        p
+    };
+    let misfit = |x: &[f64]| -> f64 {
+        let got = body.posed(&fit(x)).landmarks();
+        (0..LANDMARK_COUNT)
+            .map(|i| (got[i] - target[i]).norm_squared())
+            .sum()
+    };
+    // Landmarks within a centimetre or so are enough: the search refines the
+    // result on the frame itself.
+    let opts = SimplexOptions {
+        max_evals: 100 * (params.len() + 1),
+        ftol: 0.0,
+        abs_tol: 0.1,
+        xtol: 0.01,
+    };
+    // A second pass (fresh steps) only when the first stopped far from the targets.
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for seed in seeds {
+        let mut r = minimize(misfit, &seed, &steps, &lo, &hi, &opts);
+        if r.f > CLOSE_CM2 {
+            let again = minimize(misfit, &r.x, &steps, &lo, &hi, &opts);
+            if again.f < r.f {
+                r = again;
             }
         }
-        best.map(|(_, x)| fit(&x))
+        if best.as_ref().is_none_or(|(f, _)| r.f < *f) {
+            best = Some((r.f, r.x));
+        }
     }
+    best.map_or(base, |(_, x)| fit(&x))
 }
 
 #[cfg(test)]
@@ -431,5 +513,36 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_nod_moved_into_the_trunk_bends_it_and_keeps_the_head_nearer() {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TZ] = -300.0;
+        pose[ix::NECK] = 30.0;
+        let out = nod_into_trunk(&body, &pose).expect("a nod");
+        assert_eq!(out[ix::NECK], 0.0);
+        assert!(out[ix::SPINE] > 3.0, "spine_x {:.0}°", out[ix::SPINE]);
+        // The head top stays nearer its place than with the neck merely straightened
+        // (the fit also keeps the shoulders and hands, so the trunk takes part of
+        // the nod only).
+        let top = |p: &Pose| body.posed(p).tips[Tip::HeadTop as usize];
+        let mut straight = pose;
+        straight[ix::NECK] = 0.0;
+        let (moved, naive) = (
+            (top(&out) - top(&pose)).norm(),
+            (top(&straight) - top(&pose)).norm(),
+        );
+        assert!(
+            moved < 0.8 * naive,
+            "head top moved {moved:.1} cm, {naive:.1} cm straightened"
+        );
+        println!(
+            "spine {:.1}°, head top moved {moved:.1} cm ({naive:.1} cm straightened)",
+            out[ix::SPINE]
+        );
+        pose[ix::NECK] = 2.0;
+        assert!(nod_into_trunk(&body, &pose).is_none());
     }
 }

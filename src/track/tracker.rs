@@ -27,7 +27,7 @@ use std::time::Instant;
 
 use image::RgbImage;
 
-use super::flips::FLIPS;
+use super::flips::Jump;
 use super::keyframes::{KeyframeError, Keyframes};
 use super::objective::{sole_height, Evaluator, Target, Weights};
 use super::simplex::{minimize, SimplexOptions};
@@ -764,7 +764,7 @@ impl<'a> Search<'a> {
             opts.evals_per_param,
         );
         if !keyframe {
-            self.try_flips(&mut ev, &mut best, &mut best_f, &fixed);
+            self.try_jumps(&mut ev, &mut best, &mut best_f, &fixed);
         }
         let iou = ev.iou(&best);
         let spent = ev.evals;
@@ -788,18 +788,18 @@ impl<'a> Search<'a> {
         opts.reach * MOTION[k].scale * scale
     }
 
-    /// Tries every depth flip of `best` ([`FLIPS`]): each is refined by one pass of
-    /// the search over its groups within the acceleration reach around it (half the
-    /// budget of the frame's own search: it starts near its answer), and kept when
-    /// it explains the frame better.
-    fn try_flips(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64, fixed: &[bool]) {
+    /// Tries every jump from `best` ([`Jump`]: the depth flips and the nod moved into
+    /// the trunk): each is refined by one pass of the search over its parameters
+    /// within the acceleration reach around it (half the budget of the frame's own
+    /// search: it starts near its answer), and kept when it explains the frame better.
+    fn try_jumps(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64, fixed: &[bool]) {
         let opts = &self.tracker.opts;
-        for flip in &FLIPS {
-            let params = flip.params();
+        for jump in Jump::all() {
+            let params = jump.params();
             if params.iter().any(|&k| fixed[k]) {
                 continue;
             }
-            let Some(mut pose) = flip.apply(self.body, best) else {
+            let Some(mut pose) = jump.apply(self.body, best) else {
                 continue;
             };
             let mut f = ev.cost(&pose);
