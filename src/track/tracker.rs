@@ -20,7 +20,9 @@
 //! scales, capped by that box. The groups are searched one after another (global,
 //! torso, arms, legs — by default in the reverse order, see
 //! [`TrackOptions::global_first`]), and the whole pass repeats `restarts` times from
-//! the solution just found.
+//! the solution just found. Last, the jumps of [`super::flips`] (each bone flipped
+//! in depth, the head's nod moved into the trunk) are tried from that solution,
+//! each refined, and one kept when it explains the frame better.
 
 use std::ops::ControlFlow;
 use std::time::Instant;
