@@ -439,52 +439,66 @@ fn a_model_nearer_than_the_person_is_put_back_at_their_depth() {
     }
 }
 
+/// The standard body 3 m in front of the camera, facing it, arms slightly apart,
+/// its trunk bent forwards `spine` degrees.
+fn bent_pose(spine: f64) -> monocap::body::params::Pose {
+    use monocap::body::params::{ix, rest_pose};
+    let mut p = rest_pose();
+    p[ix::ROOT_TY] -= 130.0;
+    p[ix::ROOT_TZ] = -300.0;
+    p[ix::L_SHOULDER + 1] = 10.0;
+    p[ix::R_SHOULDER + 1] = 10.0;
+    p[ix::SPINE] = spine;
+    p
+}
+
+/// Tracks the silhouettes of the standard body bent `spines[k]` degrees on frame
+/// k (see [`bent_pose`]), from `start` on the first frame.
+fn track_bend(
+    spines: &[f64],
+    start: monocap::body::params::Pose,
+) -> monocap::track::tracker::Track {
+    use monocap::body::params::STANDARD_SHAPE;
+    use monocap::body::raster::render_mask;
+    let cam = Camera::new(320, 240, 55.0);
+    let body = Body::new(&STANDARD_SHAPE);
+    let masks: Vec<Mask> = spines
+        .iter()
+        .map(|&spine| {
+            let mut m = Mask::new(cam.width, cam.height);
+            render_mask(&body, &body.posed(&bent_pose(spine)), &cam, &mut m);
+            m
+        })
+        .collect();
+    let o = TrackOptions {
+        init_frame: Some(0),
+        initial: Some((STANDARD_SHAPE, start)),
+        ..TrackOptions::default()
+    };
+    Tracker::new(cam, o)
+        .track(inputs(&masks), Some(masks.len()), |_, _| {
+            ControlFlow::Continue(())
+        })
+        .unwrap()
+}
+
 /// A person facing the camera is bent forwards; the model starts bent backwards
 /// (the state a tracker is left in when it took the wrong branch while the bend
 /// was small: from the front both look alike, and the search around one does not
 /// reach the other). Trying the trunk's depth flip puts it on the right branch.
 #[test]
 fn a_trunk_bent_the_wrong_way_is_flipped_to_the_right_one() {
-    use monocap::body::params::{ix, rest_pose, STANDARD_SHAPE};
-    use monocap::body::raster::render_mask;
-    let cam = Camera::new(320, 240, 55.0);
-    let body = Body::new(&STANDARD_SHAPE);
-    let pose_at = |k: usize| {
-        let mut p = rest_pose();
-        p[ix::ROOT_TY] -= 130.0;
-        p[ix::ROOT_TZ] = -300.0;
-        p[ix::L_SHOULDER + 1] = 10.0;
-        p[ix::R_SHOULDER + 1] = 10.0;
-        p[ix::SPINE] = 30.0 + k as f64;
-        p
-    };
-    let n = 6;
-    let masks: Vec<Mask> = (0..n)
-        .map(|k| {
-            let mut m = Mask::new(cam.width, cam.height);
-            render_mask(&body, &body.posed(&pose_at(k)), &cam, &mut m);
-            m
-        })
-        .collect();
-    let mut start = pose_at(0);
-    start[ix::SPINE] = -start[ix::SPINE];
-    let o = TrackOptions {
-        init_frame: Some(0),
-        initial: Some((STANDARD_SHAPE, start)),
-        ..TrackOptions::default()
-    };
-    let track = Tracker::new(cam, o)
-        .track(inputs(&masks), Some(n), |_, _| ControlFlow::Continue(()))
-        .unwrap();
+    use monocap::body::params::ix;
+    let spines: Vec<f64> = (0..6).map(|k| 30.0 + k as f64).collect();
+    let track = track_bend(&spines, bent_pose(-spines[0]));
     for f in &track.frames[1..] {
-        let (got, want) = (f.pose[ix::SPINE], pose_at(f.index)[ix::SPINE]);
+        let (got, want) = (f.pose[ix::SPINE], spines[f.index]);
         println!("frame {}: spine_x {got:.0}° (truth {want:.0}°)", f.index);
     }
-    let last = &track.frames[n - 1].pose;
+    let last = track.frames.last().unwrap().pose[ix::SPINE];
     assert!(
-        (last[ix::SPINE] - pose_at(n - 1)[ix::SPINE]).abs() < 10.0,
-        "spine_x {:.0}°",
-        last[ix::SPINE]
+        (last - spines[spines.len() - 1]).abs() < 10.0,
+        "spine_x {last:.0}°"
     );
 }
 
@@ -495,45 +509,19 @@ fn a_trunk_bent_the_wrong_way_is_flipped_to_the_right_one() {
 /// the trunk (about 33° and 13°; the truth is 45° and 0°).
 #[test]
 fn a_bow_towards_the_camera_is_tracked_mostly_in_the_trunk() {
-    use monocap::body::params::{ix, rest_pose, STANDARD_SHAPE};
-    use monocap::body::raster::render_mask;
-    let cam = Camera::new(320, 240, 55.0);
-    let body = Body::new(&STANDARD_SHAPE);
-    let pose_at = |k: usize| {
-        let mut p = rest_pose();
-        p[ix::ROOT_TY] -= 130.0;
-        p[ix::ROOT_TZ] = -300.0;
-        p[ix::L_SHOULDER + 1] = 10.0;
-        p[ix::R_SHOULDER + 1] = 10.0;
-        p[ix::SPINE] = 1.5 * k as f64;
-        p
-    };
-    let n = 31;
-    let masks: Vec<Mask> = (0..n)
-        .map(|k| {
-            let mut m = Mask::new(cam.width, cam.height);
-            render_mask(&body, &body.posed(&pose_at(k)), &cam, &mut m);
-            m
-        })
-        .collect();
-    let o = TrackOptions {
-        init_frame: Some(0),
-        initial: Some((STANDARD_SHAPE, pose_at(0))),
-        ..TrackOptions::default()
-    };
-    let track = Tracker::new(cam, o)
-        .track(inputs(&masks), Some(n), |_, _| ControlFlow::Continue(()))
-        .unwrap();
+    use monocap::body::params::ix;
+    let spines: Vec<f64> = (0..31).map(|k| 1.5 * k as f64).collect();
+    let track = track_bend(&spines, bent_pose(0.0));
     for f in track.frames.iter().step_by(10) {
         println!(
             "frame {}: spine_x {:.0}° (truth {:.0}°), neck_x {:.0}° (truth 0°)",
             f.index,
             f.pose[ix::SPINE],
-            pose_at(f.index)[ix::SPINE],
+            spines[f.index],
             f.pose[ix::NECK]
         );
     }
-    let last = &track.frames[n - 1].pose;
+    let last = &track.frames.last().unwrap().pose;
     assert!(last[ix::SPINE] > 25.0, "spine_x {:.0}°", last[ix::SPINE]);
     assert!(last[ix::NECK].abs() < 20.0, "neck_x {:.0}°", last[ix::NECK]);
 }

@@ -50,26 +50,50 @@ const NECK: usize = j(J::Neck);
 const HEAD: usize = j(J::Head);
 const HEAD_TOP: usize = t(Tip::HeadTop);
 
-/// An arm's bones below the shoulder: (upper arm flipped, forearm flipped).
+/// An arm's flip: its bones below the shoulder, the upper arm and the forearm
+/// each flipped or not, refitting the arm's group.
 macro_rules! arm {
-    ($s:ident, $e:ident, $h:ident, $tip:ident, $up:expr, $low:expr) => {
-        &[
-            (j(J::$e), j(J::$s), $up),
-            (j(J::$h), j(J::$e), $low),
-            (t(Tip::$tip), j(J::$h), false),
-        ]
+    (Left, $name:expr, $up:expr, $low:expr) => {
+        arm!(@ $name, LeftArm, LeftForeArm, LeftHand, LeftHandTip, LeftArm, ix::L_SHOULDER, $up, $low)
+    };
+    (Right, $name:expr, $up:expr, $low:expr) => {
+        arm!(@ $name, RightArm, RightForeArm, RightHand, RightHandTip, RightArm, ix::R_SHOULDER, $up, $low)
+    };
+    (@ $name:expr, $s:ident, $e:ident, $h:ident, $tip:ident, $group:ident, $mirror:expr, $up:expr, $low:expr) => {
+        Flip {
+            name: $name,
+            bones: &[
+                (j(J::$e), j(J::$s), $up),
+                (j(J::$h), j(J::$e), $low),
+                (t(Tip::$tip), j(J::$h), false),
+            ],
+            groups: &[Group::$group],
+            mirror: $mirror,
+        }
     };
 }
 
-/// A leg's bones below the hip: (thigh flipped, shin flipped).
+/// A leg's flip: its bones below the hip, the thigh and the shin each flipped or
+/// not, refitting the leg's group.
 macro_rules! leg {
-    ($hip:ident, $k:ident, $a:ident, $toe:ident, $tip:ident, $up:expr, $low:expr) => {
-        &[
-            (j(J::$k), j(J::$hip), $up),
-            (j(J::$a), j(J::$k), $low),
-            (j(J::$toe), j(J::$a), false),
-            (t(Tip::$tip), j(J::$toe), false),
-        ]
+    (Left, $name:expr, $up:expr, $low:expr) => {
+        leg!(@ $name, LeftUpLeg, LeftLeg, LeftFoot, LeftToeBase, LeftToeTip, LeftLeg, ix::L_HIP, $up, $low)
+    };
+    (Right, $name:expr, $up:expr, $low:expr) => {
+        leg!(@ $name, RightUpLeg, RightLeg, RightFoot, RightToeBase, RightToeTip, RightLeg, ix::R_HIP, $up, $low)
+    };
+    (@ $name:expr, $hip:ident, $k:ident, $a:ident, $toe:ident, $tip:ident, $group:ident, $mirror:expr, $up:expr, $low:expr) => {
+        Flip {
+            name: $name,
+            bones: &[
+                (j(J::$k), j(J::$hip), $up),
+                (j(J::$a), j(J::$k), $low),
+                (j(J::$toe), j(J::$a), false),
+                (t(Tip::$tip), j(J::$toe), false),
+            ],
+            groups: &[Group::$group],
+            mirror: $mirror,
+        }
     };
 }
 
@@ -100,126 +124,18 @@ pub const FLIPS: [Flip; 14] = [
         groups: &[Group::Torso],
         mirror: ix::NECK,
     },
-    Flip {
-        name: "left upper arm",
-        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, true, false),
-        groups: &[Group::LeftArm],
-        mirror: ix::L_SHOULDER,
-    },
-    Flip {
-        name: "left forearm",
-        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, false, true),
-        groups: &[Group::LeftArm],
-        mirror: ix::L_SHOULDER,
-    },
-    Flip {
-        name: "left arm",
-        bones: arm!(LeftArm, LeftForeArm, LeftHand, LeftHandTip, true, true),
-        groups: &[Group::LeftArm],
-        mirror: ix::L_SHOULDER,
-    },
-    Flip {
-        name: "right upper arm",
-        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, true, false),
-        groups: &[Group::RightArm],
-        mirror: ix::R_SHOULDER,
-    },
-    Flip {
-        name: "right forearm",
-        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, false, true),
-        groups: &[Group::RightArm],
-        mirror: ix::R_SHOULDER,
-    },
-    Flip {
-        name: "right arm",
-        bones: arm!(RightArm, RightForeArm, RightHand, RightHandTip, true, true),
-        groups: &[Group::RightArm],
-        mirror: ix::R_SHOULDER,
-    },
-    Flip {
-        name: "left thigh",
-        bones: leg!(
-            LeftUpLeg,
-            LeftLeg,
-            LeftFoot,
-            LeftToeBase,
-            LeftToeTip,
-            true,
-            false
-        ),
-        groups: &[Group::LeftLeg],
-        mirror: ix::L_HIP,
-    },
-    Flip {
-        name: "left shin",
-        bones: leg!(
-            LeftUpLeg,
-            LeftLeg,
-            LeftFoot,
-            LeftToeBase,
-            LeftToeTip,
-            false,
-            true
-        ),
-        groups: &[Group::LeftLeg],
-        mirror: ix::L_HIP,
-    },
-    Flip {
-        name: "left leg",
-        bones: leg!(
-            LeftUpLeg,
-            LeftLeg,
-            LeftFoot,
-            LeftToeBase,
-            LeftToeTip,
-            true,
-            true
-        ),
-        groups: &[Group::LeftLeg],
-        mirror: ix::L_HIP,
-    },
-    Flip {
-        name: "right thigh",
-        bones: leg!(
-            RightUpLeg,
-            RightLeg,
-            RightFoot,
-            RightToeBase,
-            RightToeTip,
-            true,
-            false
-        ),
-        groups: &[Group::RightLeg],
-        mirror: ix::R_HIP,
-    },
-    Flip {
-        name: "right shin",
-        bones: leg!(
-            RightUpLeg,
-            RightLeg,
-            RightFoot,
-            RightToeBase,
-            RightToeTip,
-            false,
-            true
-        ),
-        groups: &[Group::RightLeg],
-        mirror: ix::R_HIP,
-    },
-    Flip {
-        name: "right leg",
-        bones: leg!(
-            RightUpLeg,
-            RightLeg,
-            RightFoot,
-            RightToeBase,
-            RightToeTip,
-            true,
-            true
-        ),
-        groups: &[Group::RightLeg],
-        mirror: ix::R_HIP,
-    },
+    arm!(Left, "left upper arm", true, false),
+    arm!(Left, "left forearm", false, true),
+    arm!(Left, "left arm", true, true),
+    arm!(Right, "right upper arm", true, false),
+    arm!(Right, "right forearm", false, true),
+    arm!(Right, "right arm", true, true),
+    leg!(Left, "left thigh", true, false),
+    leg!(Left, "left shin", false, true),
+    leg!(Left, "left leg", true, true),
+    leg!(Right, "right thigh", true, false),
+    leg!(Right, "right shin", false, true),
+    leg!(Right, "right leg", true, true),
 ];
 
 /// A bone whose end a flip moves less than this (cm) lies across its line of
@@ -317,8 +233,11 @@ pub fn nod_into_trunk(body: &Body, pose: &Pose) -> Option<Pose> {
         .filter(|k| !(ix::NECK..ix::NECK + 3).contains(k))
         .collect();
     let x0: Vec<f64> = params.iter().map(|&k| base[k]).collect();
+    // Seeds: the trunk bent by the nod, and as it is.
     let mut bent = x0.clone();
-    bent[0] = (bent[0] + pose[ix::NECK]).clamp(MOTION[ix::SPINE].lo, MOTION[ix::SPINE].hi);
+    if let Some(i) = params.iter().position(|&k| k == ix::SPINE) {
+        bent[i] = (bent[i] + pose[ix::NECK]).clamp(MOTION[ix::SPINE].lo, MOTION[ix::SPINE].hi);
+    }
     Some(fit_landmarks(body, &base, &params, &target, [bent, x0]))
 }
 

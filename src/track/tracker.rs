@@ -765,8 +765,9 @@ impl<'a> Search<'a> {
             opts.restarts,
             opts.evals_per_param,
         );
+        // A keyframe's frames keep their start (and the keyframe its parameters).
         if !keyframe {
-            self.try_jumps(&mut ev, &mut best, &mut best_f, &fixed);
+            self.try_jumps(&mut ev, &mut best, &mut best_f);
         }
         let iou = ev.iou(&best);
         let spent = ev.evals;
@@ -794,13 +795,10 @@ impl<'a> Search<'a> {
     /// the trunk): each is refined by one pass of the search over its parameters
     /// within the acceleration reach around it (half the budget of the frame's own
     /// search: it starts near its answer), and kept when it explains the frame better.
-    fn try_jumps(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64, fixed: &[bool]) {
+    fn try_jumps(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64) {
         let opts = &self.tracker.opts;
         for jump in Jump::all() {
             let params = jump.params();
-            if params.iter().any(|&k| fixed[k]) {
-                continue;
-            }
             let Some(mut pose) = jump.apply(self.body, best) else {
                 continue;
             };
