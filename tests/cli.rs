@@ -380,10 +380,10 @@ fn bench_writes_its_per_frame_figures() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,heading_error_deg,depth_ratio")
+        Some("clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert!(rows.iter().all(|r| r.len() == 9), "{text}");
+    assert!(rows.iter().all(|r| r.len() == 10), "{text}");
     // Each clip's printed frame count is its number of rows.
     let stdout = String::from_utf8_lossy(&out.stdout);
     for lead in ["lead 0", "lead 3"] {
@@ -402,4 +402,35 @@ fn bench_writes_its_per_frame_figures() {
     }
     let out = bench(&dir.path("missing/frames.csv"));
     assert_fails_with("bench to a missing folder", &out, "cannot create");
+
+    // Started from the true shape and pose, the first frame's tracked pose is the
+    // truth: its cost and the truth's, scored by the benchmark on its own, agree.
+    let oracle = dir.path("oracle.csv");
+    let out = monocap(&[
+        "bench",
+        "--mocap",
+        s(&mocap),
+        "--azimuths",
+        "60",
+        "--lead-in",
+        "2",
+        "--duration-s",
+        "0.2",
+        "--restarts",
+        "1",
+        "--oracle-init",
+        "--per-frame",
+        s(&oracle),
+    ]);
+    assert_success("bench --oracle-init", &out);
+    let text = std::fs::read_to_string(&oracle).unwrap();
+    let first: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    let (cost, truth): (f64, f64) = (first[6].parse().unwrap(), first[7].parse().unwrap());
+    assert!((cost - truth).abs() < 0.2, "tracked {cost}, truth {truth}");
+    for line in text.lines().skip(2) {
+        let r: Vec<&str> = line.split(',').collect();
+        let t: f64 = r[7].parse().unwrap();
+        assert!(t.is_finite(), "{line}");
+    }
+    assert!(String::from_utf8_lossy(&out.stdout).contains("missed: "));
 }

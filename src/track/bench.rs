@@ -21,14 +21,16 @@ use anyhow::{Context, Result};
 use image::RgbImage;
 
 use super::metrics::{self, Accumulator};
+use super::objective::{Evaluator, Target};
 use super::tracker::{FrameInput, TrackOptions, Tracker};
-use crate::body::params::ix;
+use crate::body::params::{ix, MOTION_COUNT, SHAPE_COUNT};
 use crate::body::skeleton::Joint;
 use crate::body::{Body, Camera, Mask};
 use crate::clip::write::Frame;
 use crate::motion::bvh::Bvh;
 use crate::motion::retarget::JointMap;
-use crate::synth::{synthesize_with, Style, SynthOptions};
+use crate::synth::{synthesize_with, Style, SynthOptions, Truth};
+use crate::vision::features::compute;
 use crate::vision::silhouette::{Segmenter, SilhouetteOptions};
 
 /// The joints compared.
@@ -105,9 +107,18 @@ pub struct ClipReport {
     /// Share of the tracking time spent in the search (the rest: features).
     pub search_share: f64,
     pub evals_per_frame: f64,
+    /// Frames on which the true shape and pose cost clearly less than the tracker's
+    /// result (by more than [`MISSED_GAP`] of its size): a better answer existed that
+    /// the search did not find. On the others the tracker is about as good as the
+    /// truth by the objective's measure, or the objective itself prefers its pose.
+    pub missed: usize,
     /// Each frame with a person, in order.
     pub frames: Vec<FrameReport>,
 }
+
+/// A frame is missed when the truth costs less than the tracker's result by more than
+/// this fraction of the result's size (a near-perfect fit is never quite the truth).
+pub const MISSED_GAP: f64 = 0.05;
 
 /// One frame's figures (`monocap bench --per-frame`): where a clip goes wrong, and
 /// how (the heading and depth errors show a body turned the wrong way or drifted
@@ -121,6 +132,8 @@ pub struct FrameReport {
     pub iou: f64,
     /// The tracker's cost (None where it found no person).
     pub cost: Option<f64>,
+    /// The objective at the true shape and pose, on the same silhouette and features.
+    pub truth_cost: f64,
     /// The model's heading (root y rotation) minus the truth's, in (−180°, 180°].
     pub heading_error_deg: f64,
     /// The model's root depth over the truth's.
@@ -130,18 +143,19 @@ pub struct FrameReport {
 impl FrameReport {
     /// The header of [`FrameReport::csv_row`].
     pub const CSV_HEADER: &'static str =
-        "clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,heading_error_deg,depth_ratio";
+        "clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio";
 
     /// One CSV line (no newline) for the clip `clip`.
     pub fn csv_row(&self, clip: &str) -> String {
         format!(
-            "{clip},{},{:.3},{:.3},{:.1},{:.4},{},{:.1},{:.4}",
+            "{clip},{},{:.3},{:.3},{:.1},{:.4},{},{:.1},{:.1},{:.4}",
             self.index,
             self.pck,
             self.pck_swapped,
             self.pa_mpjpe_mm,
             self.iou,
             self.cost.map_or(String::new(), |c| format!("{c:.1}")),
+            self.truth_cost,
             self.heading_error_deg,
             self.depth_ratio
         )
@@ -251,6 +265,8 @@ pub fn run_clip(
     }
     let tracker = Tracker::new(camera.clone(), track_opts);
     let n = frames.len();
+    // The tracker takes the frames; the truth is scored on copies afterwards.
+    let kept = (silhouettes.clone(), frames.clone());
     let inputs = silhouettes
         .into_iter()
         .zip(frames)
@@ -280,8 +296,11 @@ pub fn run_clip(
         track_fps: n as f64 / secs.max(1e-9),
         search_share: track.timing.search / (track.timing.search + track.timing.features).max(1e-9),
         evals_per_frame: track.timing.evals as f64 / n as f64,
+        missed: 0,
         frames: Vec::new(),
     };
+    let truth_costs = truth_costs(&kept.0, &kept.1, &truth, &camera, opts);
+    drop(kept);
     for tf in &truth.frames {
         let f = &track.frames[tf.index];
         let posed = body.posed(&f.pose);
@@ -310,6 +329,12 @@ pub fn run_clip(
         }
         report.acc.add_frame(&plain, &swapped, pa, iou);
         let heading = f.pose[ix::ROOT_RY] - tf.params[ix::ROOT_RY];
+        let truth_cost = truth_costs[tf.index];
+        if f.cost
+            .is_some_and(|c| truth_cost < c - MISSED_GAP * c.abs())
+        {
+            report.missed += 1;
+        }
         report.frames.push(FrameReport {
             index: tf.index,
             pck: plain.pck(),
@@ -317,6 +342,7 @@ pub fn run_clip(
             pa_mpjpe_mm: pa,
             iou,
             cost: f.cost,
+            truth_cost,
             heading_error_deg: 180.0 - (180.0 - heading).rem_euclid(360.0),
             depth_ratio: f.pose[ix::ROOT_TZ] / tf.params[ix::ROOT_TZ],
         });
@@ -326,4 +352,33 @@ pub fn run_clip(
 
 fn mask_height(m: &Mask) -> f64 {
     super::tracker::mask_bbox(m).map_or(0.0, |b| (b[3] - b[1] + 1) as f64)
+}
+
+/// The objective at the true shape and pose on every frame (+∞ before the person
+/// appears), with the features the tracker computes from the same silhouettes and
+/// images.
+fn truth_costs(
+    silhouettes: &[Mask],
+    images: &[RgbImage],
+    truth: &Truth,
+    camera: &Camera,
+    opts: &BenchOptions,
+) -> Vec<f64> {
+    let mut shape = [0.0; SHAPE_COUNT];
+    shape.copy_from_slice(&truth.shape.values);
+    let body = Body::new(&shape);
+    let mut out = vec![f64::INFINITY; silhouettes.len()];
+    let mut prev = None;
+    let mut at = truth.frames.iter().peekable();
+    for (i, (s, img)) in silhouettes.iter().zip(images).enumerate() {
+        let f = compute(s, Some(img), prev.as_ref(), &opts.track.features);
+        if let Some(tf) = at.next_if(|tf| tf.index == i) {
+            let target = Target::new(&f, &opts.track.weights);
+            let mut pose = [0.0; MOTION_COUNT];
+            pose.copy_from_slice(&tf.params);
+            out[i] = Evaluator::new(&body, camera, &target, opts.track.weights, None).cost(&pose);
+        }
+        prev = Some(f);
+    }
+    out
 }
