@@ -612,9 +612,10 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         fps[fps.len() / 2]
     );
     println!(
-        "missed: {:.1}% of frames, where the true shape and pose cost over 5% less than the \
-         tracked result (the search fell short of an answer the objective prefers)",
-        100.0 * missed as f64 / all.frames().max(1) as f64
+        "missed: {:.1}% of frames, where the true shape and pose cost over {:.0}% less than \
+         the tracked result (the search fell short of an answer the objective prefers)",
+        100.0 * missed as f64 / all.frames().max(1) as f64,
+        100.0 * bench::MISSED_GAP
     );
     if let (Some(path), Some(mut f)) = (&a.per_frame, per_frame) {
         if let Some(e) = write_error {

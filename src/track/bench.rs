@@ -266,7 +266,7 @@ pub fn run_clip(
     let tracker = Tracker::new(camera.clone(), track_opts);
     let n = frames.len();
     // The tracker takes the frames; the truth is scored on copies afterwards.
-    let kept = (silhouettes.clone(), frames.clone());
+    let (kept_silhouettes, kept_frames) = (silhouettes.clone(), frames.clone());
     let inputs = silhouettes
         .into_iter()
         .zip(frames)
@@ -299,8 +299,8 @@ pub fn run_clip(
         missed: 0,
         frames: Vec::new(),
     };
-    let truth_costs = truth_costs(&kept.0, &kept.1, &truth, &camera, opts);
-    drop(kept);
+    let truth_costs = truth_costs(&kept_silhouettes, &kept_frames, &truth, &camera, opts);
+    drop((kept_silhouettes, kept_frames));
     for tf in &truth.frames {
         let f = &track.frames[tf.index];
         let posed = body.posed(&f.pose);

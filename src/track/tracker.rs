@@ -87,8 +87,8 @@ pub struct TrackOptions {
     /// model's IoU from 0.821 to 0.841, lost frames from 47 to 29 and the frames
     /// where the truth costs clearly less than the result from 58% to 44%, but the
     /// median speed from 12.0 to 6.6 frames/s; at 500 evaluations with half the
-    /// simplex budget (as fast as without) the gains were within the benchmark's
-    /// noise. Off by default for the speed it costs.
+    /// simplex budget (11.1 frames/s) the gains were within the benchmark's noise.
+    /// Off by default for the speed it costs.
     pub polish_evals: usize,
     /// The initial frame (None: chosen automatically).
     pub init_frame: Option<usize>,
@@ -808,7 +808,6 @@ impl<'a> Search<'a> {
     /// free in [lo, hi], in units of each parameter's length scale, from `best` with
     /// a spread of 0.3 of them; keeps the best pose it evaluates when it is better.
     /// Seeded by `seed` (the frame), so a clip always tracks the same way.
-    #[allow(clippy::too_many_arguments)]
     fn polish(
         &self,
         ev: &mut Evaluator,
