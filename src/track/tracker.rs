@@ -614,15 +614,15 @@ impl Tracker {
 
 /// The initial pose among `candidates` (each with its summed cost over the next
 /// frames): the cheapest, unless it turns its back on the camera and a candidate
-/// facing the camera costs at most [`FACING_TIE`] more.
+/// facing the camera comes within [`FACING_TIE`] (a fraction) of its cost.
 ///
 /// One silhouette cannot tell a body from its mirror image in depth (facing the
 /// camera or turned away, left and right swapped): only perspective separates them,
-/// by a fraction of a percent of the cost. On the benchmark's frontal clips such
-/// pairs came within 0.04–0.4% of each other and the cheaper one was the mirror
-/// image in three of eight; real clips for motion capture mostly start with the
-/// person facing the camera, so a tie goes that way. A keyframe on the initial frame
-/// overrides it.
+/// and only a little. On the benchmark's seven frontal clips whose candidates
+/// were such a pair they came within 0.04–3.4% of each other, and the mirror image
+/// was cheaper three times, by 0.04–0.36%; real clips for motion capture mostly
+/// start with the person facing the camera, so a tie goes that way. A keyframe on
+/// the initial frame overrides it.
 fn choose_hypothesis(candidates: &[(f64, Pose)], camera: &Camera) -> Pose {
     let cheapest = candidates
         .iter()
