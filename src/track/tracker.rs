@@ -367,7 +367,8 @@ impl Tracker {
         // Initialisation gives up early when asked to stop; its result is then moot.
         self.check_stop()?;
         let body = Body::new(&shape);
-        // Several candidates: keep the one that explains the next frames best.
+        // Several candidates: keep the one that explains the next frames best (a
+        // near tie goes to the one facing the camera, [`choose_hypothesis`]).
         let init_pose = if candidates.len() == 1 {
             candidates[0]
         } else {
