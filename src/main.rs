@@ -211,6 +211,10 @@ struct BenchArgs {
     /// after the hierarchical search; 0 for none.
     #[arg(long, default_value_t = 0)]
     polish_evals: usize,
+    /// Search a frame again widely when the model covers its silhouette with an IoU
+    /// under this (at most every fifth frame); 0 for never.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().recover_iou)]
+    recover_iou: f64,
     /// Track the true silhouettes instead of the extracted ones.
     #[arg(long)]
     true_silhouettes: bool,
@@ -534,6 +538,13 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         );
     }
     opts.track.polish_evals = a.polish_evals;
+    if !(0.0..=1.0).contains(&a.recover_iou) {
+        anyhow::bail!(
+            "--recover-iou {}: expected an IoU from 0 to 1",
+            a.recover_iou
+        );
+    }
+    opts.track.recover_iou = a.recover_iou;
     a.weights.apply(&mut opts.track.weights)?;
     let mut per_frame = match &a.per_frame {
         Some(path) => {
