@@ -61,9 +61,9 @@ const FACING_TIE: f64 = 0.01;
 /// The default of [`TrackOptions::recover_iou`].
 const RECOVER_IOU: f64 = 0.75;
 
-/// A loss is searched for again at most once in this many frames (a silhouette the model cannot match, a
-/// person half out of the picture, would otherwise make every frame several times
-/// dearer).
+/// A loss is searched for again at most once in this many frames (a silhouette the
+/// model cannot match, a person half out of the picture, would otherwise make every
+/// frame several times dearer).
 const RECOVER_GAP: usize = 5;
 
 /// The joint polish's initial spread, in length scales of each parameter.
@@ -933,11 +933,16 @@ impl<'a> Search<'a> {
     /// with a lead-in this took PCK from 0.811 to 0.839, lost frames from 47 to 17 and
     /// PA-MPJPE from 146 to 143 mm (without a lead-in PCK 0.560 → 0.580, PA-MPJPE
     /// 190 → 182 mm), for 9% of the speed (median 13.5 → 12.3 frames/s). An IoU
-    /// threshold of 0.7, or of 0.8 with every third frame allowed, gave PCK 0.824 and
-    /// 0.830, also better than none (the benchmark's noise: the reach of the search at 4, 4.5 and 5
-    /// gave 0.798, 0.824 and 0.801). On real masks (DAVIS), where the model's IoU
-    /// stays near 0.7–0.8 all along, it runs on up to every fifth frame; the mean
-    /// IoU moved from 0.728 to 0.732.
+    /// threshold of 0.7, or of 0.8 with every third frame allowed, gave PCK 0.824
+    /// and 0.830, also better than none (the benchmark's noise: the search's reach
+    /// at 4, 4.5 and 5 gave 0.798, 0.824 and 0.801). On real masks (DAVIS), where
+    /// the model's IoU stays near 0.7–0.8 all along, it may run every fifth frame;
+    /// the mean IoU moved from 0.728 to 0.732.
+    ///
+    /// Coarse still: in a synthetic 70° turn (tests/track.rs) it covers the person
+    /// again (IoU 0.631 → 0.775) but at heading −57°, costing −37,371 where the true
+    /// pose costs −49,471; and a loss the frame's search leaves above IoU 0.75 (a
+    /// 45° turn ends at 0.784) does not trigger it.
     fn recover(&self, target: &Target, best: &mut Pose, best_f: &mut f64) -> (bool, u64) {
         let mut found = false;
         let mut spent = 0;
