@@ -581,13 +581,9 @@ fn a_person_turned_out_of_reach_is_covered_again() {
         p[ix::R_HIP] = 70.0;
         p
     };
-    let masks: Vec<Mask> = (0..12)
-        .map(|_| {
-            let mut m = Mask::new(cam.width, cam.height);
-            render_mask(&body, &body.posed(&posed_at(70.0)), &cam, &mut m);
-            m
-        })
-        .collect();
+    let mut turned = Mask::new(cam.width, cam.height);
+    render_mask(&body, &body.posed(&posed_at(70.0)), &cam, &mut turned);
+    let masks = vec![turned; 12];
     let o = TrackOptions {
         init_frame: Some(0),
         initial: Some((STANDARD_SHAPE, posed_at(0.0))),
