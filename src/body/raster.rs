@@ -651,4 +651,46 @@ mod tests {
         }
         assert!(mask.count() > 500);
     }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
+
+        /// Any pose within the joint limits and any heading, near and far, limbs
+        /// pointing at the camera or across it: the fast render (row spans, cylinder
+        /// ends trimmed at the caps) covers exactly the pixels whose rays meet a part.
+        #[test]
+        fn fast_render_matches_direct_ray_tests_in_any_pose(
+            unit in proptest::collection::vec(0.0f64..1.0, params::MOTION_COUNT),
+            depth in 150.0f64..600.0,
+            heading in -180.0f64..180.0,
+        ) {
+            let body = Body::new(&STANDARD_SHAPE);
+            let mut pose = params::rest_pose();
+            for (k, t) in unit.iter().enumerate().skip(params::ix::ROOT_RX) {
+                let m = &params::MOTION[k];
+                pose[k] = m.lo + t * (m.hi - m.lo);
+            }
+            pose[params::ix::ROOT_TX] = (unit[0] - 0.5) * 60.0;
+            pose[params::ix::ROOT_TY] = (unit[1] - 0.5) * 60.0;
+            pose[params::ix::ROOT_TZ] = -depth;
+            pose[params::ix::ROOT_RY] = heading;
+            let posed = body.skeleton.posed(&pose);
+            let cam = Camera::new(120, 90, 55.0).with_pose(IsometryMatrix3::identity());
+            let mut mask = Mask::new(120, 90);
+            render_mask(&body, &posed, &cam, &mut mask);
+            let cov = render_coverage(&body, &posed, &cam, 1);
+            for y in 0..90 {
+                for x in 0..120 {
+                    let direct = cov[y * 120 + x] > 0.5;
+                    proptest::prop_assert_eq!(
+                        mask.get(x as u32, y as u32),
+                        direct,
+                        "pixel {},{}",
+                        x,
+                        y
+                    );
+                }
+            }
+        }
+    }
 }
