@@ -9,8 +9,11 @@
 //! frame with the input mask and the model's silhouette tinted over it.
 //!
 //! ```text
-//! cargo run --release --example davis_track [picture.png]
+//! cargo run --release --example davis_track [picture.png] [--reward-rim N]
 //! ```
+//!
+//! `--reward-rim N` tracks with that reward rim (`Weights::reward_rim`; 0, the
+//! paper's objective, by default).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -77,10 +80,20 @@ fn main() -> Result<()> {
         );
         return Ok(());
     }
-    let picture = std::env::args_os()
-        .nth(1)
-        .map(PathBuf::from)
-        .unwrap_or_else(|| root.join("docs/davis_tracking.png"));
+    let mut picture = root.join("docs/davis_tracking.png");
+    let mut reward_rim = 0.0;
+    let mut args = std::env::args_os().skip(1);
+    while let Some(a) = args.next() {
+        if a == "--reward-rim" {
+            let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
+            match v {
+                Some(v) if v.is_finite() && v >= 0.0 => reward_rim = v,
+                _ => bail!("--reward-rim: expected a number ≥ 0"),
+            }
+        } else {
+            picture = PathBuf::from(a);
+        }
+    }
     for readme in ["README", "README.md", "README.txt"] {
         if let Ok(text) = std::fs::read_to_string(data.join(readme)) {
             println!("{}:\n{}\n", readme, text.trim());
@@ -98,7 +111,7 @@ fn main() -> Result<()> {
             println!("{seq}: {} not found, skipped", dir.display());
             continue;
         }
-        match run_sequence(seq, &dir, &tmp) {
+        match run_sequence(seq, &dir, &tmp, reward_rim) {
             Ok(r) => results.push(r),
             Err(e) => {
                 outcome = Err(e.context(format!("sequence {seq}")));
@@ -174,7 +187,7 @@ fn read_mask(path: &Path) -> Result<(Mask, [u64; 3])> {
     Ok((Mask::from_gray(&gray, 128), hist))
 }
 
-fn run_sequence(seq: &str, dir: &Path, tmp: &Path) -> Result<SeqResult> {
+fn run_sequence(seq: &str, dir: &Path, tmp: &Path, reward_rim: f64) -> Result<SeqResult> {
     let masks = list(&dir.join("masks"), "png")?;
     let frames = list(&dir.join("frames"), "jpg")?;
     if masks.is_empty() {
@@ -190,10 +203,11 @@ fn run_sequence(seq: &str, dir: &Path, tmp: &Path) -> Result<SeqResult> {
     let zip_path = tmp.join(format!("{seq}.zip"));
     pack_zip(&masks, &zip_path)?;
 
-    let opts = ClipTrackOptions {
+    let mut opts = ClipTrackOptions {
         masks: true,
         ..ClipTrackOptions::default()
     };
+    opts.track.weights.reward_rim = reward_rim;
     let t0 = Instant::now();
     let mut done = 0usize;
     let clip: ClipTrack = track_clip(&zip_path, &opts, |_, _| {

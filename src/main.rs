@@ -126,6 +126,11 @@ struct WeightArgs {
     /// Weight of the arm/leg region term (Eq. 6).
     #[arg(long, default_value_t = 20.0)]
     w_region: f64,
+    /// Pixels of the silhouette this close to its outline earn no edge or region
+    /// reward while tracking (0: the paper's objective; 2 keeps the model at the
+    /// person's depth from a right start)
+    #[arg(long, default_value_t = 0.0)]
+    reward_rim: f64,
 }
 
 impl WeightArgs {
@@ -134,6 +139,7 @@ impl WeightArgs {
             ("--w-edge", self.w_edge),
             ("--w-extremity", self.w_extremity),
             ("--w-region", self.w_region),
+            ("--reward-rim", self.reward_rim),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
@@ -142,6 +148,7 @@ impl WeightArgs {
         w.edge = self.w_edge;
         w.extremity = self.w_extremity;
         w.region = self.w_region;
+        w.reward_rim = self.reward_rim;
         Ok(())
     }
 }

@@ -29,6 +29,10 @@ pub struct JobOptions {
     pub w_region: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_core: Option<f64>,
+    /// Pixels near the silhouette's outline that earn no edge or region reward while
+    /// tracking (default 0, the paper's objective; see `Weights::reward_rim`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reward_rim: Option<f64>,
     /// Frame to initialise on (default: chosen automatically).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_frame: Option<usize>,
@@ -110,6 +114,7 @@ impl JobOptions {
             ("w_extremity", self.w_extremity, &mut w.extremity),
             ("w_region", self.w_region, &mut w.region),
             ("w_core", self.w_core, &mut o.track.features.core_weight),
+            ("reward_rim", self.reward_rim, &mut w.reward_rim),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {

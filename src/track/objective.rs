@@ -35,6 +35,14 @@ pub struct Weights {
     pub extremity: f64,
     /// w_a of Eq. 6 (per region pixel the model covers).
     pub region: f64,
+    /// Pixels of the silhouette within this distance (pixels) of its outline earn
+    /// neither the edge nor the region reward (0, the paper's objective: they do).
+    /// The XOR term already prices the outline; rewarding it as well makes a model
+    /// slightly larger than the person cheaper than one of their size, so over
+    /// frames the model creeps nearer the camera and bends to keep its image. See
+    /// [`crate::track::tracker::TrackOptions::weights`] for where it applies and its
+    /// figures.
+    pub reward_rim: f64,
 }
 
 impl Default for Weights {
@@ -43,6 +51,7 @@ impl Default for Weights {
             edge: 20.0,
             extremity: 20.0,
             region: 20.0,
+            reward_rim: 0.0,
         }
     }
 }
@@ -87,10 +96,12 @@ impl Target {
                 } else {
                     d
                 };
-                if inside && f.edges.get(x, y) {
+                // Off the outline's rim (all of it when the rim is 0).
+                let core = f.inside[i] as f64 > w.reward_rim;
+                if inside && core && f.edges.get(x, y) {
                     g -= w.edge as f32;
                 }
-                if f.regions.get(x, y) {
+                if core && f.regions.get(x, y) {
                     limb_gain[i] = -w.region as f32;
                 }
                 gain[i] = g;
@@ -593,6 +604,42 @@ mod tests {
         let mut moved = pose;
         moved[ix::ROOT_TX] += 10.0;
         assert!(ev.cost(&moved) > ev.cost(&pose));
+    }
+
+    #[test]
+    fn a_reward_rim_takes_the_rewards_off_the_outline_only() {
+        let (body, cam, pose) = scene();
+        let (f, paper) = target_of(&body, &cam, &pose);
+        let w = Weights {
+            reward_rim: 2.0,
+            ..Weights::default()
+        };
+        let rim = Target::new(&f, &w);
+        let (mut outline_rewards, mut deep_regions) = (0, 0);
+        for (i, &depth) in f.inside.iter().enumerate() {
+            let d = f.coremap[i];
+            if depth > 0.0 && depth <= 2.0 {
+                // Without a colour frame the edges are the outline itself.
+                if paper.gain[i] < -d {
+                    outline_rewards += 1;
+                }
+                assert_eq!(rim.gain[i], -d, "pixel {i}: an outline pixel keeps its XOR");
+                assert_eq!(rim.limb_gain[i], 0.0, "pixel {i}");
+            } else {
+                assert_eq!(rim.gain[i], paper.gain[i], "pixel {i}");
+                assert_eq!(rim.limb_gain[i], paper.limb_gain[i], "pixel {i}");
+                deep_regions += usize::from(rim.limb_gain[i] < 0.0);
+            }
+        }
+        assert!(
+            outline_rewards > 100,
+            "{outline_rewards} rewarded outline pixels"
+        );
+        assert!(
+            deep_regions > 100,
+            "{deep_regions} region pixels off the rim"
+        );
+        assert_eq!(rim.base, paper.base);
     }
 
     #[test]

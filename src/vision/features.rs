@@ -118,6 +118,9 @@ pub struct FrameFeatures {
     /// not "outside"); when S or S̄ has no pixel, the other transform is 0. The
     /// core-weighted XOR is Σ over mismatched pixels of this map.
     pub coremap: Vec<f32>,
+    /// D(S): each pixel's distance to the nearest pixel outside the silhouette (0
+    /// outside it), row-major; how deep inside the person a pixel lies.
+    pub inside: Vec<f32>,
     /// Eq. 4 edge map T: pixels whose Sobel gradient magnitude exceeds the threshold
     /// within `edge_band` pixels of the silhouette; without a colour frame, the
     /// silhouette's own outline (pixels of S with a 4-neighbour outside S).
@@ -192,6 +195,7 @@ pub fn compute(
         width: w,
         height: h,
         coremap,
+        inside,
         edges,
         contour: Vec::new(),
         extremities: Vec::new(),
@@ -235,7 +239,7 @@ pub fn compute(
         .map(|p| p[0])
         .unwrap_or((bbox[0] + bbox[2] + 1) as f64 / 2.0);
     f.crotch = find_crotch(&f.person, bbox, body_h, axis_x);
-    f.regions = find_regions(&f.person, bbox, body_h, f.neck, f.crotch, &inside);
+    f.regions = find_regions(&f.person, bbox, body_h, f.neck, f.crotch, &f.inside);
 
     let mut cands = Vec::new();
     for c in &contours {
