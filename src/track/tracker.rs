@@ -84,7 +84,7 @@ pub struct TrackOptions {
     /// (median tracked/true root depth 0.946 → 0.984) and takes PCK@0.1 from
     /// 0.895 to 0.907, PA-MPJPE from 114 to 100 mm, IoU from 0.871 to 0.910 and
     /// lost frames from 30 to 8. From the tracker's own start (a standard-shaped
-    /// body, too large for these performers) it does not pay yet: PCK 0.839 →
+    /// body, off these performers' proportions) it does not pay yet: PCK 0.839 →
     /// 0.830, with swaps 0.910 → 0.901, PA-MPJPE 142.5 → 142.6 mm, IoU 0.826 →
     /// 0.863, lost 17 → 43. Off by default.
     pub weights: Weights,
