@@ -76,6 +76,9 @@ pub struct Target {
     pub silhouette: Mask,
     /// Height of the person's bounding box in pixels (0 when there is no person).
     pub body_height: f64,
+    /// The rewards a reward rim ([`Weights::reward_rim`]) withheld: pixel index,
+    /// edge reward, region reward (negative; 0 when none). Empty without a rim.
+    withheld: Vec<(usize, f32, f32)>,
 }
 
 impl Target {
@@ -85,6 +88,7 @@ impl Target {
         let mut gain = vec![0f32; f.coremap.len()];
         let mut limb_gain = vec![0f32; f.coremap.len()];
         let mut base = 0.0;
+        let mut withheld = Vec::new();
         for y in 0..height {
             for x in 0..width {
                 let i = (y * width + x) as usize;
@@ -96,13 +100,22 @@ impl Target {
                 } else {
                     d
                 };
+                let edge = if inside && f.edges.get(x, y) {
+                    -w.edge as f32
+                } else {
+                    0.0
+                };
+                let region = if f.regions.get(x, y) {
+                    -w.region as f32
+                } else {
+                    0.0
+                };
                 // Off the outline's rim (all of it when the rim is 0).
-                let core = f.inside[i] as f64 > w.reward_rim;
-                if inside && core && f.edges.get(x, y) {
-                    g -= w.edge as f32;
-                }
-                if core && f.regions.get(x, y) {
-                    limb_gain[i] = -w.region as f32;
+                if f.inside[i] as f64 > w.reward_rim {
+                    g += edge;
+                    limb_gain[i] = region;
+                } else if edge != 0.0 || region != 0.0 {
+                    withheld.push((i, edge, region));
                 }
                 gain[i] = g;
             }
@@ -129,7 +142,22 @@ impl Target {
             heads,
             silhouette: s.clone(),
             body_height: f.body_height,
+            withheld,
         }
+    }
+
+    /// The same frame under the paper's objective, the rewards a reward rim withheld
+    /// given back; None when nothing was withheld (the target already is).
+    pub fn paper(&self) -> Option<Target> {
+        if self.withheld.is_empty() {
+            return None;
+        }
+        let mut t = self.clone();
+        for (i, edge, region) in std::mem::take(&mut t.withheld) {
+            t.gain[i] += edge;
+            t.limb_gain[i] = region;
+        }
+        Some(t)
     }
 
     /// Whether the frame shows a person at all.
@@ -640,6 +668,10 @@ mod tests {
             "{deep_regions} region pixels off the rim"
         );
         assert_eq!(rim.base, paper.base);
+        let back = rim.paper().expect("rewards withheld");
+        assert_eq!(back.gain, paper.gain);
+        assert_eq!(back.limb_gain, paper.limb_gain);
+        assert!(paper.paper().is_none(), "nothing withheld without a rim");
     }
 
     #[test]

@@ -252,9 +252,6 @@ pub struct Tracker {
 struct Pending {
     /// None on frames without a person (nothing to fit there, nothing kept).
     target: Option<Target>,
-    /// With a reward rim ([`Weights::reward_rim`]), the frame's target without it,
-    /// for the initialisation and the choice among its candidates.
-    whole: Option<Target>,
     score: f64,
 }
 
@@ -299,10 +296,9 @@ impl Tracker {
         let mut prev_features: Option<FrameFeatures> = None;
         let next_target = |index: usize,
                            input: FrameInput,
-                           keep_whole: bool,
                            prev: &mut Option<FrameFeatures>,
                            timing: &mut Timing|
-         -> Result<(Option<Target>, Option<Target>, f64), TrackError> {
+         -> Result<(Option<Target>, f64), TrackError> {
             if input.silhouette.width() != w || input.silhouette.height() != h {
                 return Err(TrackError::FrameSize {
                     index,
@@ -320,19 +316,11 @@ impl Tracker {
                 &self.opts.features,
             );
             let score = init_score(&f);
-            let person = f.body_height >= MIN_PERSON_HEIGHT;
-            let weights = &self.opts.weights;
-            let target = person.then(|| Target::new(&f, weights));
-            let whole = (person && keep_whole && weights.reward_rim > 0.0).then(|| {
-                let paper = Weights {
-                    reward_rim: 0.0,
-                    ..*weights
-                };
-                Target::new(&f, &paper)
-            });
+            let target =
+                (f.body_height >= MIN_PERSON_HEIGHT).then(|| Target::new(&f, &self.opts.weights));
             *prev = Some(f);
             timing.features += t0.elapsed().as_secs_f64();
-            Ok((target, whole, score))
+            Ok((target, score))
         };
 
         // Phase 1: buffer frames until the initial frame is known.
@@ -357,16 +345,11 @@ impl Tracker {
             };
             let input = input.map_err(TrackError::Input)?;
             self.check_stop()?;
-            let (target, whole, score) =
-                next_target(i, input, true, &mut prev_features, &mut timing)?;
+            let (target, score) = next_target(i, input, &mut prev_features, &mut timing)?;
             if target.is_some() {
                 person_frames += 1;
             }
-            pending.push(Pending {
-                target,
-                whole,
-                score,
-            });
+            pending.push(Pending { target, score });
         }
         if pending.is_empty() {
             return Err(TrackError::Empty);
@@ -402,9 +385,11 @@ impl Tracker {
         // Phase 2: initialise.
         let t0 = Instant::now();
         let init_target = pending[init].target.as_ref().expect("a person frame");
+        // With a reward rim ([`Weights::reward_rim`]) the initialisation and the
+        // choice among its candidates judge by the paper's objective.
         let (shape, candidates) = match self.opts.initial {
             Some((shape, pose)) => (shape, vec![pose]),
-            None => self.initialise(pending[init].whole.as_ref().unwrap_or(init_target)),
+            None => self.initialise(init_target.paper().as_ref().unwrap_or(init_target)),
         };
         // Initialisation gives up early when asked to stop; its result is then moot.
         self.check_stop()?;
@@ -429,8 +414,9 @@ impl Tracker {
                     let mut history = History::new(*c);
                     for &i in run.iter() {
                         self.check_stop()?;
-                        let p = &pending[i];
-                        let t = p.whole.as_ref().or(p.target.as_ref());
+                        let t = pending[i].target.as_ref();
+                        let paper = t.and_then(Target::paper);
+                        let t = paper.as_ref().or(t);
                         total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
                     }
                 }
@@ -496,7 +482,7 @@ impl Tracker {
         let mut out: Vec<TrackedFrame> = results.into_iter().map(|r| r.expect("tracked")).collect();
         for (i, input) in frames {
             let input = input.map_err(TrackError::Input)?;
-            let (target, _, _) = next_target(i, input, false, &mut prev_features, &mut timing)?;
+            let (target, _) = next_target(i, input, &mut prev_features, &mut timing)?;
             let t0 = Instant::now();
             let f = search.step(i, target.as_ref(), &mut history);
             timing.search += t0.elapsed().as_secs_f64();
