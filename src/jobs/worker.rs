@@ -262,6 +262,12 @@ impl Jobs {
         if let Ok(mut m) = self.running.lock() {
             m.insert(id.clone(), stop.clone());
         }
+        // Open the job's live log now, not at its first event: a subscriber that
+        // finds none polls the database, and a job canceled and deleted before its
+        // first frame would take its final events with it before the next poll.
+        if let Err(e) = self.live(&id).await {
+            tracing::warn!("cannot open the job's live log: {e:#}");
+        }
         // A cancel or a shutdown between the claim and the line above found nothing
         // to flag: look again now that the flag is there.
         if self.cancel_recorded(&id).await {
