@@ -77,6 +77,9 @@ async fn pump(
 ) -> anyhow::Result<()> {
     let send = |e: Event| async move { tx.send(sse(&e)).await.is_ok() };
     loop {
+        // Taken first, so that a log opened or a job ended after the look below
+        // wakes the wait for one.
+        let mut changes = s.jobs.bus.changes();
         // Whatever is live now stays readable through this handle even if the job
         // ends meanwhile.
         let live = s.jobs.bus.get(id);
@@ -98,12 +101,14 @@ async fn pump(
         }
         let Some(live) = live else {
             // Not live in this process: ended (all stored, sent above), deleted, or
-            // queued without a log yet; look again shortly.
+            // queued without a log yet (or run by another process); look again when
+            // a log opens or a job ends here, or shortly.
             match s.jobs.store.job(id).await? {
                 Some(j) if !j.state.is_final() => {}
                 _ => return Ok(()),
             }
             tokio::select! {
+                _ = changes.changed() => continue,
                 _ = tokio::time::sleep(Duration::from_millis(500)) => continue,
                 _ = s.jobs.shutdown.cancelled() => return Ok(()),
                 _ = tx.closed() => return Ok(()),

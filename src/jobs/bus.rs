@@ -145,15 +145,40 @@ pub fn numbered(next: i64, events: Vec<(&str, serde_json::Value)>) -> Vec<Event>
         .collect()
 }
 
-/// The live logs by job id.
-#[derive(Default)]
+/// The live logs by job id, and a signal raised whenever a job's log opens or a
+/// job ends.
 pub struct Bus {
     jobs: Mutex<HashMap<String, Arc<Live>>>,
+    changes: watch::Sender<u64>,
+}
+
+impl Default for Bus {
+    fn default() -> Bus {
+        Bus {
+            jobs: Mutex::default(),
+            changes: watch::channel(0).0,
+        }
+    }
 }
 
 impl Bus {
     pub fn new() -> Bus {
         Bus::default()
+    }
+
+    /// A receiver woken when a job's log opens or a job ends (see [`Bus::changed`]).
+    ///
+    /// A subscriber to a job with no log in this process polls the database; a job
+    /// can start, end and be deleted (its stored events with it) between two polls.
+    /// Woken at once instead, it takes the log while the job runs, or reads the
+    /// final events before the deletion, which waits for the job to end.
+    pub fn changes(&self) -> watch::Receiver<u64> {
+        self.changes.subscribe()
+    }
+
+    /// Wakes the receivers of [`Bus::changes`] (a job ended, or its log opened).
+    pub fn changed(&self) {
+        self.changes.send_modify(|n| *n = n.wrapping_add(1));
     }
 
     fn map(&self) -> std::sync::MutexGuard<'_, HashMap<String, Arc<Live>>> {
@@ -166,10 +191,19 @@ impl Bus {
 
     /// The job's log, opened with events numbered from `next_seq` if it has none.
     pub fn open(&self, id: &str, next_seq: i64) -> Arc<Live> {
-        self.map()
-            .entry(id.to_string())
-            .or_insert_with(|| Arc::new(Live::new(next_seq)))
-            .clone()
+        let (live, opened) = {
+            let mut map = self.map();
+            let opened = !map.contains_key(id);
+            let live = map
+                .entry(id.to_string())
+                .or_insert_with(|| Arc::new(Live::new(next_seq)))
+                .clone();
+            (live, opened)
+        };
+        if opened {
+            self.changed();
+        }
+        live
     }
 
     /// Closes and forgets the job's log.
@@ -216,5 +250,19 @@ mod tests {
         bus.remove("a");
         assert!(live.after(9).1, "removed logs are closed");
         assert!(bus.get("a").is_none());
+    }
+
+    #[test]
+    fn watchers_wake_when_a_log_opens_or_a_job_ends() {
+        let bus = Bus::new();
+        let mut rx = bus.changes();
+        assert!(!rx.has_changed().unwrap());
+        bus.open("a", 1);
+        assert!(rx.has_changed().unwrap(), "a log opened");
+        rx.borrow_and_update();
+        bus.open("a", 1);
+        assert!(!rx.has_changed().unwrap(), "the same log again");
+        bus.changed();
+        assert!(rx.has_changed().unwrap(), "a job ended");
     }
 }

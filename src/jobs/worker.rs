@@ -174,6 +174,7 @@ impl Jobs {
                 l.publish(&events);
             }
             self.bus.remove(job);
+            self.bus.changed();
         }
         Ok(done)
     }
