@@ -191,19 +191,13 @@ impl Bus {
 
     /// The job's log, opened with events numbered from `next_seq` if it has none.
     pub fn open(&self, id: &str, next_seq: i64) -> Arc<Live> {
-        let (live, opened) = {
-            let mut map = self.map();
-            let opened = !map.contains_key(id);
-            let live = map
-                .entry(id.to_string())
-                .or_insert_with(|| Arc::new(Live::new(next_seq)))
-                .clone();
-            (live, opened)
+        use std::collections::hash_map::Entry;
+        let opened = match self.map().entry(id.to_string()) {
+            Entry::Occupied(e) => return e.get().clone(),
+            Entry::Vacant(e) => e.insert(Arc::new(Live::new(next_seq))).clone(),
         };
-        if opened {
-            self.changed();
-        }
-        live
+        self.changed();
+        opened
     }
 
     /// Closes and forgets the job's log.

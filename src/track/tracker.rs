@@ -406,6 +406,16 @@ impl Tracker {
                 .rev()
                 .take(HYPOTHESIS_FRAMES - after.len())
                 .collect();
+            // These frames' targets under the paper's objective, made once for all
+            // the candidates (none without a reward rim).
+            let paper: Vec<Option<Target>> = (0..pending.len())
+                .map(|i| {
+                    let probed = after.contains(&i) || before.contains(&i);
+                    probed
+                        .then(|| pending[i].target.as_ref().and_then(Target::paper))
+                        .flatten()
+                })
+                .collect();
             let mut totals: Vec<(f64, Pose)> = Vec::with_capacity(candidates.len());
             for c in &candidates {
                 let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
@@ -414,9 +424,7 @@ impl Tracker {
                     let mut history = History::new(*c);
                     for &i in run.iter() {
                         self.check_stop()?;
-                        let t = pending[i].target.as_ref();
-                        let paper = t.and_then(Target::paper);
-                        let t = paper.as_ref().or(t);
+                        let t = paper[i].as_ref().or(pending[i].target.as_ref());
                         total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
                     }
                 }
