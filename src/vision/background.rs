@@ -123,6 +123,9 @@ pub struct BackgroundModel {
     /// Pixels the clip never showed empty (the person covered them in every frame):
     /// their `mean` is a guess, and a hole in a silhouette made of them is filled.
     pub unknown: Option<Mask>,
+    /// Where a person who hardly moved stood all clip long (see [`still_person`]):
+    /// foreground in every frame.
+    pub still: Option<Mask>,
 }
 
 /// Colours sampled per pixel.
@@ -316,6 +319,7 @@ impl BackgroundBuilder {
                         count: self.still_count,
                     },
                     unknown: None,
+                    still: None,
                 },
                 None,
             );
@@ -359,6 +363,7 @@ impl BackgroundBuilder {
                 sigma,
                 source: ModelSource::WholeClip { frames },
                 unknown: None,
+                still: None,
             },
             Some(candidates),
         )
@@ -387,11 +392,18 @@ impl BackgroundBuilder {
 /// 0.733 / 0.663 to 0.993 / 0.974. Taking every unknown pixel for the person in
 /// every frame lifted lucia to 0.89–0.90 but took three others down to 0.89–0.91
 /// (scenes with still people of their own), so unknown pixels only fill holes.
+///
+/// A foreground nearly empty in most frames means a person who stayed on one spot
+/// (or none): see [`still_person`] (the synthetic dance: IoU 0.017 → 0.816).
 pub struct Refiner {
     base: BackgroundModel,
     acc: Vec<Running>,
     candidates: Option<Candidates>,
     odds: ColourOdds,
+    /// Per pixel, the frames whose raw foreground held it …
+    moved: Vec<u16>,
+    /// … and per frame the cleaned silhouette's share of the image (4 bytes a frame).
+    shares: Vec<f32>,
 }
 
 /// A pixel's colour cluster, compactly: its mean colour and how many samples it holds.
@@ -463,6 +475,8 @@ impl Refiner {
             acc: vec![Running::default(); n],
             candidates,
             odds: ColourOdds::new(),
+            moved: vec![0; n],
+            shares: Vec::new(),
         }
     }
 
@@ -472,11 +486,16 @@ impl Refiner {
     }
 
     /// Adds a frame with its raw foreground (against the first estimate), the region
-    /// its person may occupy and a band around that region.
-    pub fn push(&mut self, frame: &RgbImage, raw: &Mask, person: &Mask, around: &Mask) {
+    /// its person may occupy, a band around that region and the share of the image
+    /// its cleaned silhouette covers.
+    pub fn push(&mut self, frame: &RgbImage, raw: &Mask, person: &Mask, around: &Mask, share: f32) {
         let w = self.base.width as usize;
+        self.shares.push(share);
         for (i, px) in frame.pixels().enumerate() {
             let (x, y) = ((i % w) as u32, (i / w) as u32);
+            if raw.get(x, y) {
+                self.moved[i] = self.moved[i].saturating_add(1);
+            }
             if let Some(c) = &self.candidates {
                 // Where one colour holds nearly all the clip the scene is sure: the
                 // foreground there is the person, the band around them the scene.
@@ -533,8 +552,63 @@ impl Refiner {
         }
         cap_sigma(&mut model.sigma);
         model.unknown = Some(unknown);
+        let mut shares = self.shares;
+        if median(&mut shares).is_some_and(|m| (m as f64) < MIN_MEDIAN_FOREGROUND) {
+            model.still = still_person(&self.moved, model.width, model.height);
+        }
         model
     }
+}
+
+/// Below this median share of the image, the foreground of a background learned
+/// from the whole clip is taken for a failure: a person this small (some 14×14 pixels
+/// of a 320×240 frame) cannot be tracked anyway, and one who stood still all clip
+/// long is the likelier reading.
+pub const MIN_MEDIAN_FOREGROUND: f64 = 0.0025;
+
+/// Where a person who hardly moved stood, from the pixels that ever changed: a person
+/// who stays on one spot all clip long is in the whole-clip background, and only
+/// their outline, as they sway, and their limbs, as they move, ever show as
+/// foreground. That outline encloses them: the region it closes (outline included)
+/// is the person (the synthetic dance: 78% of it never changed). None when nothing
+/// changed, or when more than half the region did: people who crossed the scene now
+/// and then, not one who stood still.
+fn still_person(moved: &[u16], width: u32, height: u32) -> Option<Mask> {
+    let mut outline = Mask::new(width, height);
+    for (i, &n) in moved.iter().enumerate() {
+        if n > 0 {
+            outline.set(i as u32 % width, i as u32 / width, true);
+        }
+    }
+    if outline.count() == 0 {
+        return None;
+    }
+    let r = (height / 40).clamp(1, 24) as u8;
+    let closed = imageproc::morphology::close(
+        &outline.to_gray(),
+        imageproc::distance_transform::Norm::LInf,
+        r,
+    );
+    let mut person = Mask::from_gray(&closed, 128);
+    let holes = super::blobs::Blobs::label(&person, false, super::blobs::Connectivity::Four);
+    let enclosed: Vec<bool> = (0..holes.blobs.len())
+        .map(|l| !holes.touches_border(l))
+        .collect();
+    let filled = holes.mask_of(&enclosed);
+    for y in 0..height {
+        for x in 0..width {
+            if filled.get(x, y) {
+                person.set(x, y, true);
+            }
+        }
+    }
+    // A person's interior never changes; what passers-by sweep (a mostly empty clip
+    // with people crossing now and then) changed nearly everywhere.
+    let unchanged = (0..height)
+        .flat_map(|y| (0..width).map(move |x| (x, y)))
+        .filter(|&(x, y)| person.get(x, y) && moved[(y * width + x) as usize] == 0)
+        .count();
+    (unchanged as u64 * 2 >= person.count()).then_some(person)
 }
 
 /// A cluster seen in at least this fraction of the frames is a candidate for the
@@ -740,6 +814,15 @@ impl BackgroundModel {
         if !shadows.is_empty() && opts.shadow_max_texture.is_finite() {
             for i in self.textured_shadows(frame, &shadows, opts) {
                 out.set((i % w) as u32, (i / w) as u32, true);
+            }
+        }
+        if let Some(still) = &self.still {
+            for y in 0..self.height {
+                for x in 0..self.width {
+                    if still.get(x, y) {
+                        out.set(x, y, true);
+                    }
+                }
             }
         }
     }

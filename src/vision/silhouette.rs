@@ -10,6 +10,7 @@ use imageproc::morphology::dilate;
 
 use super::background::{
     BackgroundBuilder, BackgroundModel, BackgroundOptions, ModelSource, Refiner,
+    MIN_MEDIAN_FOREGROUND,
 };
 use super::cleanup::{clean_with_unknown, person_region, CleanupOptions};
 use crate::body::Mask;
@@ -67,7 +68,10 @@ impl Segmenter {
                 refiner.base().foreground(f, &opts.background, &mut raw);
                 let person = person_region(&raw, &opts.cleanup, grow);
                 let around = Mask::from_gray(&dilate(&person.to_gray(), Norm::LInf, grow), 128);
-                refiner.push(f, &raw, &person, &around);
+                let mut clean = raw.clone();
+                clean_with_unknown(&mut clean, &opts.cleanup, None);
+                let share = clean.count() as f32 / (width as f32 * height as f32).max(1.0);
+                refiner.push(f, &raw, &person, &around, share);
             })?;
             model = refiner.finish();
         }
@@ -105,18 +109,17 @@ pub struct ClipSilhouettes {
     pub frames: usize,
     /// The median over the frames of the silhouette's share of the image.
     pub median_foreground: f64,
+    /// The person seemed to stand still all clip long and was found as the region
+    /// their outline encloses ([`BackgroundModel::still`]).
+    pub still_person: bool,
 }
-
-/// Below this median share of the image, silhouettes from a whole-clip background
-/// are taken for a failure (see [`ClipSilhouettes::warning`]): a person this small
-/// (some 14×14 pixels of a 320×240 frame) cannot be tracked anyway.
-const MIN_MEDIAN_FOREGROUND: f64 = 0.0025;
 
 impl ClipSilhouettes {
     /// What the user should know about silhouettes that look wrong. A background
     /// learned from the whole clip is the scene only where the person moves off it:
     /// a person who stands still in every frame is taken for the scene and their
-    /// silhouette is nearly empty.
+    /// silhouette is nearly empty, or, when they moved enough to outline themselves,
+    /// the same region in every frame.
     pub fn warning(&self) -> Option<String> {
         match self.source {
             Some(ModelSource::WholeClip { .. })
@@ -132,6 +135,14 @@ impl ClipSilhouettes {
                     100.0 * self.median_foreground
                 ))
             }
+            Some(ModelSource::WholeClip { .. }) if self.still_person => Some(
+                "the clip has no person-free frames and the person seems to stay on the same \
+                 spot: their silhouette is the region their outline enclosed as they moved, \
+                 the same in every frame (limbs held close to the body merge with it); for \
+                 exact silhouettes name the clip's person-free frames (--empty-frames A..B; \
+                 the job option empty_frames) or film a few seconds of the empty scene first"
+                    .to_string(),
+            ),
             _ => None,
         }
     }
@@ -202,6 +213,7 @@ pub fn clip_silhouettes(
             source: None,
             frames,
             median_foreground: median_share(shares),
+            still_person: false,
         });
     }
     let seg = Segmenter::learn(w, h, opts, |visit| {
@@ -226,5 +238,111 @@ pub fn clip_silhouettes(
         source: Some(seg.model.source.clone()),
         frames,
         median_foreground: median_share(shares),
+        still_person: seg.model.still.is_some(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::vision::background::EmptyFrames;
+
+    /// A 120×90 textured scene with a person (a 14×40 block in two colours) standing
+    /// at (50, 30) in every frame, a pixel to the right in one frame of eight and a
+    /// pixel lower in another; noise varying per frame.
+    fn frame(f: u32) -> RgbImage {
+        let (x0, y0) = match f % 8 {
+            3 => (51, 30),
+            6 => (50, 31),
+            _ => (50, 30),
+        };
+        RgbImage::from_fn(120, 90, |x, y| {
+            let n = ((x * 7 + y * 13 + f * 31) % 5) as u8;
+            if (x0..x0 + 14).contains(&x) && (y0..y0 + 40).contains(&y) {
+                let c = if y < y0 + 20 {
+                    [40, 80, 170]
+                } else {
+                    [90, 70, 60]
+                };
+                image::Rgb(c.map(|v| v + n))
+            } else {
+                image::Rgb([150 + n, 140 + (x % 9) as u8 + n, 120 + n])
+            }
+        })
+    }
+
+    /// The default options, without person-free frames.
+    fn whole_clip() -> SilhouetteOptions {
+        SilhouetteOptions {
+            background: BackgroundOptions {
+                empty: EmptyFrames::None,
+                ..BackgroundOptions::default()
+            },
+            ..SilhouetteOptions::default()
+        }
+    }
+
+    #[test]
+    fn a_person_who_never_leaves_their_spot_is_found_by_the_outline_they_sway() {
+        let opts = whole_clip();
+        let seg = Segmenter::learn(120, 90, &opts, |visit| {
+            (0..30).for_each(|f| visit(&frame(f)));
+            Ok::<_, ()>(())
+        })
+        .unwrap();
+        // The whole-clip background took the person for the scene; only the
+        // outline changed.
+        let still = seg.model.still.as_ref().expect("a still person");
+        let mut out = Mask::new(120, 90);
+        seg.silhouette(&frame(31), &mut out);
+        let (mut inter, mut union) = (0, 0);
+        for y in 0..90 {
+            for x in 0..120 {
+                let truth = (50..64).contains(&x) && (30..70).contains(&y);
+                inter += (truth && out.get(x, y)) as u32;
+                union += (truth || out.get(x, y)) as u32;
+            }
+        }
+        let iou = inter as f64 / union as f64;
+        assert!(
+            iou > 0.85,
+            "IoU {iou:.3}, still region of {} px",
+            still.count()
+        );
+    }
+
+    #[test]
+    fn someone_crossing_a_mostly_empty_scene_is_not_a_still_person() {
+        let opts = whole_clip();
+        // Empty but for frames 20..26, in which a block crosses from left to right.
+        let at = |f: u32| {
+            let mut img = frame(f);
+            for y in 0..90 {
+                for x in 0..120 {
+                    let n = ((x * 7 + y * 13 + f * 31) % 5) as u8;
+                    let crossing = (20..26).contains(&f)
+                        && (f * 18 - 350..f * 18 - 336).contains(&x)
+                        && (30..70).contains(&y);
+                    let c = if crossing {
+                        [40 + n, 80 + n, 170 + n]
+                    } else {
+                        [150 + n, 140 + (x % 9) as u8 + n, 120 + n]
+                    };
+                    img.put_pixel(x, y, image::Rgb(c));
+                }
+            }
+            img
+        };
+        let seg = Segmenter::learn(120, 90, &opts, |visit| {
+            (0..40).for_each(|f| visit(&at(f)));
+            Ok::<_, ()>(())
+        })
+        .unwrap();
+        assert!(seg.model.still.is_none());
+        let mut out = Mask::new(120, 90);
+        seg.silhouette(&at(30), &mut out);
+        assert_eq!(out.count(), 0);
+        seg.silhouette(&at(22), &mut out);
+        assert!(out.get(52, 50) && !out.get(80, 50));
+    }
 }
