@@ -127,6 +127,14 @@ impl Mask {
         );
     }
 
+    /// Sets every pixel set in `other`.
+    pub fn or_with(&mut self, other: &Mask) {
+        self.same_size(other);
+        for (a, b) in self.words.iter_mut().zip(&other.words) {
+            *a |= b;
+        }
+    }
+
     /// Pixels set in both.
     pub fn and_count(&self, other: &Mask) -> u64 {
         self.same_size(other);

@@ -594,18 +594,7 @@ fn still_person(moved: &[u16], width: u32, height: u32) -> Option<Mask> {
         r,
     );
     let mut person = Mask::from_gray(&closed, 128);
-    let holes = super::blobs::Blobs::label(&person, false, super::blobs::Connectivity::Four);
-    let enclosed: Vec<bool> = (0..holes.blobs.len())
-        .map(|l| !holes.touches_border(l))
-        .collect();
-    let filled = holes.mask_of(&enclosed);
-    for y in 0..height {
-        for x in 0..width {
-            if filled.get(x, y) {
-                person.set(x, y, true);
-            }
-        }
-    }
+    super::cleanup::fill_holes(&mut person, f64::INFINITY, None);
     // A person's interior never changes; what passers-by sweep (a mostly empty clip
     // with people crossing now and then) changed nearly everywhere.
     let unchanged = (0..height)
@@ -922,13 +911,7 @@ impl BackgroundModel {
             }
         }
         if let Some(still) = &self.still {
-            for y in 0..self.height {
-                for x in 0..self.width {
-                    if still.get(x, y) {
-                        out.set(x, y, true);
-                    }
-                }
-            }
+            out.or_with(still);
         }
     }
 

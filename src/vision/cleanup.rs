@@ -62,21 +62,17 @@ pub fn clean_with_unknown(mask: &mut Mask, opts: &CleanupOptions, unknown: Optio
     fill_holes(mask, opts.max_hole_fraction, unknown);
 }
 
-/// The region a person may occupy: the cleaned mask with every hole filled, grown by
-/// `grow` pixels. Used to keep the person out of background statistics.
-pub fn person_region(mask: &Mask, opts: &CleanupOptions, grow: u8) -> Mask {
-    let all_holes = CleanupOptions {
-        max_hole_fraction: f64::INFINITY,
-        ..opts.clone()
-    };
-    let mut m = mask.clone();
-    clean(&mut m, &all_holes);
+/// The region a person may occupy: a cleaned mask ([`clean`]) with every hole filled,
+/// grown by `grow` pixels. Used to keep the person out of background statistics.
+pub fn person_region(clean: &Mask, grow: u8) -> Mask {
+    let mut m = clean.clone();
+    fill_holes(&mut m, f64::INFINITY, None);
     Mask::from_gray(&dilate(&m.to_gray(), Norm::LInf, grow), 128)
 }
 
 /// Fills background regions that do not reach the image border and are at most
 /// `max_fraction` of the foreground's area, or mostly `unknown`.
-fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Mask>) {
+pub(super) fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Mask>) {
     let holes = Blobs::label(mask, false, Connectivity::Four);
     let mut unknown_area = vec![0u64; holes.blobs.len()];
     if let Some(u) = unknown {
@@ -96,14 +92,7 @@ fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Mask>) {
                 && ((area as f64) <= max_fraction * fg || 2 * unknown_area[l] >= area)
         })
         .collect();
-    let filled = holes.mask_of(&fill);
-    for y in 0..mask.height() {
-        for x in 0..mask.width() {
-            if filled.get(x, y) {
-                mask.set(x, y, true);
-            }
-        }
-    }
+    mask.or_with(&holes.mask_of(&fill));
 }
 
 #[cfg(test)]

@@ -66,11 +66,11 @@ impl Segmenter {
             let grow = ((height as f64 * grow).round().min(255.0) as u8).max(1);
             pass(&mut |f| {
                 refiner.base().foreground(f, &opts.background, &mut raw);
-                let person = person_region(&raw, &opts.cleanup, grow);
-                let around = Mask::from_gray(&dilate(&person.to_gray(), Norm::LInf, grow), 128);
                 let mut clean = raw.clone();
                 clean_with_unknown(&mut clean, &opts.cleanup, None);
                 let share = clean.count() as f32 / (width as f32 * height as f32).max(1.0);
+                let person = person_region(&clean, grow);
+                let around = Mask::from_gray(&dilate(&person.to_gray(), Norm::LInf, grow), 128);
                 refiner.push(f, &raw, &person, &around, share);
             })?;
             model = refiner.finish();
@@ -248,6 +248,17 @@ mod tests {
     use super::*;
     use crate::vision::background::EmptyFrames;
 
+    /// Noise of pixel (x, y) in frame f: 0 to 4 levels.
+    fn noise(x: u32, y: u32, f: u32) -> u8 {
+        ((x * 7 + y * 13 + f * 31) % 5) as u8
+    }
+
+    /// The textured scene's colour at (x, y) in frame f.
+    fn scene(x: u32, y: u32, f: u32) -> image::Rgb<u8> {
+        let n = noise(x, y, f);
+        image::Rgb([150 + n, 140 + (x % 9) as u8 + n, 120 + n])
+    }
+
     /// A 120×90 textured scene with a person (a 14×40 block in two colours) standing
     /// at (50, 30) in every frame, a pixel to the right in one frame of eight and a
     /// pixel lower in another; noise varying per frame.
@@ -258,52 +269,54 @@ mod tests {
             _ => (50, 30),
         };
         RgbImage::from_fn(120, 90, |x, y| {
-            let n = ((x * 7 + y * 13 + f * 31) % 5) as u8;
             if (x0..x0 + 14).contains(&x) && (y0..y0 + 40).contains(&y) {
                 let c = if y < y0 + 20 {
                     [40, 80, 170]
                 } else {
                     [90, 70, 60]
                 };
-                image::Rgb(c.map(|v| v + n))
+                image::Rgb(c.map(|v| v + noise(x, y, f)))
             } else {
-                image::Rgb([150 + n, 140 + (x % 9) as u8 + n, 120 + n])
+                scene(x, y, f)
             }
         })
     }
 
-    /// The default options, without person-free frames.
-    fn whole_clip() -> SilhouetteOptions {
-        SilhouetteOptions {
+    /// A segmenter learned without person-free frames from frames 0..count of `at`.
+    fn learn(count: u32, at: impl Fn(u32) -> RgbImage) -> Segmenter {
+        let opts = SilhouetteOptions {
             background: BackgroundOptions {
                 empty: EmptyFrames::None,
                 ..BackgroundOptions::default()
             },
             ..SilhouetteOptions::default()
-        }
+        };
+        Segmenter::learn(120, 90, &opts, |visit| {
+            (0..count).for_each(|f| visit(&at(f)));
+            Ok::<_, ()>(())
+        })
+        .unwrap()
+    }
+
+    /// The pixels of `inside` that `mask` holds.
+    fn held(mask: &Mask, inside: impl Fn(u32, u32) -> bool) -> usize {
+        (0..mask.height())
+            .flat_map(|y| (0..mask.width()).map(move |x| (x, y)))
+            .filter(|&(x, y)| inside(x, y) && mask.get(x, y))
+            .count()
     }
 
     #[test]
     fn a_person_who_never_leaves_their_spot_is_found_by_the_outline_they_sway() {
-        let opts = whole_clip();
-        let seg = Segmenter::learn(120, 90, &opts, |visit| {
-            (0..30).for_each(|f| visit(&frame(f)));
-            Ok::<_, ()>(())
-        })
-        .unwrap();
+        let seg = learn(30, frame);
         // The whole-clip background took the person for the scene; only the
         // outline changed.
         let still = seg.model.still.as_ref().expect("a still person");
         let mut out = Mask::new(120, 90);
         seg.silhouette(&frame(31), &mut out);
-        let (mut inter, mut union) = (0, 0);
-        for y in 0..90 {
-            for x in 0..120 {
-                let truth = (50..64).contains(&x) && (30..70).contains(&y);
-                inter += (truth && out.get(x, y)) as u32;
-                union += (truth || out.get(x, y)) as u32;
-            }
-        }
+        let truth = |x: u32, y: u32| (50..64).contains(&x) && (30..70).contains(&y);
+        let inter = held(&out, truth);
+        let union = 14 * 40 + out.count() as usize - inter;
         let iou = inter as f64 / union as f64;
         assert!(
             iou > 0.85,
@@ -323,66 +336,40 @@ mod tests {
         let gap = |x: u32, y: u32| (60..64).contains(&x) && (40..52).contains(&y);
         let at = |f: u32| {
             let mut img = frame(f);
-            for y in 0..90 {
-                for x in 0..120 {
-                    let n = ((x * 7 + y * 13 + f * 31) % 5) as u8;
-                    if leg(x, y) {
-                        img.put_pixel(x, y, image::Rgb([90 + n, 70 + n, 60 + n]));
-                    } else if gap(x, y) {
-                        let scene = [150 + n, 140 + (x % 9) as u8 + n, 120 + n];
-                        img.put_pixel(x, y, image::Rgb(scene));
-                    }
+            for (x, y, px) in img.enumerate_pixels_mut() {
+                if leg(x, y) {
+                    *px = image::Rgb([90, 70, 60].map(|v| v + noise(x, y, f)));
+                } else if gap(x, y) {
+                    *px = scene(x, y, f);
                 }
             }
             img
         };
-        let seg = Segmenter::learn(120, 90, &whole_clip(), |visit| {
-            (0..30).for_each(|f| visit(&at(f)));
-            Ok::<_, ()>(())
-        })
-        .unwrap();
+        let seg = learn(30, at);
         assert!(seg.model.still.is_some());
         let mut out = Mask::new(120, 90);
         seg.silhouette(&at(31), &mut out);
-        let leg_found = (0..90)
-            .flat_map(|y| (0..120).map(move |x| (x, y)))
-            .filter(|&(x, y)| leg(x, y) && out.get(x, y))
-            .count();
-        let gap_taken = (0..90)
-            .flat_map(|y| (0..120).map(move |x| (x, y)))
-            .filter(|&(x, y)| gap(x, y) && out.get(x, y))
-            .count();
+        let (leg_found, gap_taken) = (held(&out, leg), held(&out, gap));
         assert!(leg_found >= 20, "{leg_found} of the leg's 24 pixels");
         assert!(gap_taken <= 8, "{gap_taken} of the notch's 48 pixels");
     }
 
     #[test]
     fn someone_crossing_a_mostly_empty_scene_is_not_a_still_person() {
-        let opts = whole_clip();
         // Empty but for frames 20..26, in which a block crosses from left to right.
         let at = |f: u32| {
-            let mut img = frame(f);
-            for y in 0..90 {
-                for x in 0..120 {
-                    let n = ((x * 7 + y * 13 + f * 31) % 5) as u8;
-                    let crossing = (20..26).contains(&f)
-                        && (f * 18 - 350..f * 18 - 336).contains(&x)
-                        && (30..70).contains(&y);
-                    let c = if crossing {
-                        [40 + n, 80 + n, 170 + n]
-                    } else {
-                        [150 + n, 140 + (x % 9) as u8 + n, 120 + n]
-                    };
-                    img.put_pixel(x, y, image::Rgb(c));
+            RgbImage::from_fn(120, 90, |x, y| {
+                let crossing = (20..26).contains(&f)
+                    && (f * 18 - 350..f * 18 - 336).contains(&x)
+                    && (30..70).contains(&y);
+                if crossing {
+                    image::Rgb([40, 80, 170].map(|v| v + noise(x, y, f)))
+                } else {
+                    scene(x, y, f)
                 }
-            }
-            img
+            })
         };
-        let seg = Segmenter::learn(120, 90, &opts, |visit| {
-            (0..40).for_each(|f| visit(&at(f)));
-            Ok::<_, ()>(())
-        })
-        .unwrap();
+        let seg = learn(40, at);
         assert!(seg.model.still.is_none());
         let mut out = Mask::new(120, 90);
         seg.silhouette(&at(30), &mut out);
