@@ -60,6 +60,55 @@ pub fn clean_with_unknown(mask: &mut Mask, opts: &CleanupOptions, unknown: Optio
         *mask = blobs.mask_of(&keep);
     }
     fill_holes(mask, opts.max_hole_fraction, unknown);
+    if let Some(u) = unknown.filter(|u| u.count() > 0) {
+        fill_unknown_bays(mask, u);
+    }
+}
+
+/// Fills the regions the mask nearly encloses that are mostly `unknown`: where the
+/// person covered pixels all clip long and the scene guessed there matched their
+/// clothes, the miss opens to the scene through a gap of a few pixels, so it is no
+/// hole. Closed over 1/120 of the image height, it is one. Without person-free
+/// frames, lucia over the tennis and dance-twirl scenes: IoU 0.863 → 0.894 and 0.821
+/// → 0.843 (the other DAVIS composites within 0.001; at 1/60: 0.885 and 0.837).
+fn fill_unknown_bays(mask: &mut Mask, unknown: &Mask) {
+    let (w, h) = (mask.width(), mask.height());
+    let r = (h / 120).clamp(1, 24);
+    // Only the person's bounding box and a margin are looked at (the whole image took
+    // 19 ms a frame at 854×480): the margin is background all round, so a region
+    // touching the crop's edge reaches the image's.
+    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
+    for y in 0..h {
+        if mask.row(y).iter().all(|&word| word == 0) {
+            continue;
+        }
+        for x in (0..w).filter(|&x| mask.get(x, y)) {
+            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
+        }
+    }
+    if x0 > x1 {
+        return;
+    }
+    let m = r + 2;
+    let (x0, y0) = (x0.saturating_sub(m), y0.saturating_sub(m));
+    let (x1, y1) = ((x1 + m).min(w - 1), (y1 + m).min(h - 1));
+    let crop = |src: &Mask| {
+        image::GrayImage::from_fn(x1 - x0 + 1, y1 - y0 + 1, |x, y| {
+            image::Luma([if src.get(x + x0, y + y0) { 255 } else { 0 }])
+        })
+    };
+    let person = crop(mask);
+    let mut closed = Mask::from_gray(
+        &imageproc::morphology::close(&person, Norm::LInf, r as u8),
+        128,
+    );
+    closed.or_with(&Mask::from_gray(&person, 128));
+    let bays = holes_to_fill(&closed, 0.0, Some(&Mask::from_gray(&crop(unknown), 128)));
+    for y in 0..bays.height() {
+        for x in (0..bays.width()).filter(|&x| bays.get(x, y)) {
+            mask.set(x + x0, y + y0, true);
+        }
+    }
 }
 
 /// The region a person may occupy: a cleaned mask ([`clean`]) with every hole filled,
@@ -73,6 +122,12 @@ pub fn person_region(clean: &Mask, grow: u8) -> Mask {
 /// Fills background regions that do not reach the image border and are at most
 /// `max_fraction` of the foreground's area, or mostly `unknown`.
 pub(super) fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Mask>) {
+    let fill = holes_to_fill(mask, max_fraction, unknown);
+    mask.or_with(&fill);
+}
+
+/// The holes [`fill_holes`] fills.
+fn holes_to_fill(mask: &Mask, max_fraction: f64, unknown: Option<&Mask>) -> Mask {
     let holes = Blobs::label(mask, false, Connectivity::Four);
     let mut unknown_area = vec![0u64; holes.blobs.len()];
     if let Some(u) = unknown {
@@ -92,7 +147,7 @@ pub(super) fn fill_holes(mask: &mut Mask, max_fraction: f64, unknown: Option<&Ma
                 && ((area as f64) <= max_fraction * fg || 2 * unknown_area[l] >= area)
         })
         .collect();
-    mask.or_with(&holes.mask_of(&fill));
+    holes.mask_of(&fill)
 }
 
 #[cfg(test)]
@@ -123,6 +178,36 @@ mod tests {
         assert!(!m.get(150, 110), "noise dropped");
         assert!(m.get(91, 51), "hole filled");
         assert!(!m.get(112, 80), "no growth beyond closing the gap");
+    }
+
+    #[test]
+    fn a_nearly_enclosed_unknown_region_is_filled() {
+        // A torso whose middle was missed, open to the scene through a 1-pixel gap
+        // at its side: filled when the middle is unknown, left open otherwise.
+        let mut m = Mask::new(240, 240);
+        rect(&mut m, 100, 40, 140, 200);
+        for y in 80..120 {
+            for x in 110..141 {
+                m.set(x, y, false);
+            }
+        }
+        for y in 80..120 {
+            if y != 100 {
+                m.set(140, y, true);
+            }
+        }
+        let mut unknown = Mask::new(240, 240);
+        rect(&mut unknown, 112, 82, 136, 116);
+        let opts = CleanupOptions::default();
+        let mut known = m.clone();
+        clean_with_unknown(&mut known, &opts, None);
+        assert!(!known.get(120, 100), "a bay of the scene stays open");
+        clean_with_unknown(&mut m, &opts, Some(&unknown));
+        assert!(
+            m.get(120, 100) && m.get(111, 81),
+            "the unknown bay is filled"
+        );
+        assert!(!m.get(140, 100), "the gap itself is not bridged");
     }
 
     #[test]
