@@ -26,9 +26,9 @@
 //! 0.660, 0.765 with the texture test (0.888 with no shadows at all, but the
 //! composites have none and real clips do). Without person-free frames the six DAVIS
 //! composites went from 0.813 / 0.958 / 0.940 / 0.660 / 0.944 / 0.921 to 0.830 /
-//! 0.960 / 0.952 / 0.765 / 0.951 / 0.924 (lucia's two went on to 0.894 and 0.843 with
-//! more pixels taken for unknown, see [`Refiner`]); on vtest.mp4 the test gives back to the
-//! walkers about 70% of the pixels colour alone had called shadow, mostly their dark
+//! 0.960 / 0.952 / 0.765 / 0.951 / 0.924 (lucia's two went on to 0.894 and 0.843
+//! with more pixels taken for unknown, see [`Refiner`]); on vtest.mp4 the test gives
+//! back to the walkers about 70% of the pixels colour alone had called shadow, mostly their dark
 //! clothes and blurred outlines. At 0.7 times the noise rather than 1, lucia scored
 //! 0.850 and 0.869, but the faint shadows between a walker's feet in vtest.mp4 turned
 //! foreground too.

@@ -43,7 +43,8 @@ pub fn clean(mask: &mut Mask, opts: &CleanupOptions) {
 }
 
 /// Cleans `mask` in place; a hole of which at least half the pixels are `unknown`
-/// (never seen without the person) is filled whatever its size.
+/// (never seen without the person) is filled whatever its size, and so is such a
+/// region that opens to the scene through a narrow gap only (`fill_unknown_bays`).
 pub fn clean_with_unknown(mask: &mut Mask, opts: &CleanupOptions, unknown: Option<&Mask>) {
     if mask.count() == 0 {
         return;
