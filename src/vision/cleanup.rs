@@ -78,18 +78,9 @@ fn fill_unknown_bays(mask: &mut Mask, unknown: &Mask) {
     // Only the person's bounding box and a margin are looked at (the whole image took
     // 19 ms a frame at 854×480): the margin is background all round, so a region
     // touching the crop's edge reaches the image's.
-    let (mut x0, mut y0, mut x1, mut y1) = (u32::MAX, u32::MAX, 0, 0);
-    for y in 0..h {
-        if mask.row(y).iter().all(|&word| word == 0) {
-            continue;
-        }
-        for x in (0..w).filter(|&x| mask.get(x, y)) {
-            (x0, y0, x1, y1) = (x0.min(x), y0.min(y), x1.max(x), y1.max(y));
-        }
-    }
-    if x0 > x1 {
+    let Some([x0, y0, x1, y1]) = super::features::bounding_box(mask) else {
         return;
-    }
+    };
     let m = r + 2;
     let (x0, y0) = (x0.saturating_sub(m), y0.saturating_sub(m));
     let (x1, y1) = ((x1 + m).min(w - 1), (y1 + m).min(h - 1));

@@ -427,7 +427,8 @@ fn select_person(s: &Mask, opts: &FeatureOptions) -> (Mask, Vec<Vec<[i32; 2]>>) 
     (person, contours)
 }
 
-fn bounding_box(m: &Mask) -> Option<[u32; 4]> {
+/// The set pixels' bounding box `[x0, y0, x1, y1]` (inclusive); None when empty.
+pub(super) fn bounding_box(m: &Mask) -> Option<[u32; 4]> {
     let mut b: Option<[u32; 4]> = None;
     for y in 0..m.height() {
         for (wi, &word) in m.row(y).iter().enumerate() {
