@@ -88,7 +88,14 @@ pub struct BackgroundOptions {
     /// … and their chromaticity distortion (in σ units) is at most this.
     pub shadow_max_chroma: f32,
     /// … and around them the frame is the scene times one factor, up to this many
-    /// times the noise (infinite: colour alone decides).
+    /// times the noise (infinite: colour alone decides). A shadow's residual is the
+    /// camera's noise in brightness, about 0.6 of the per-channel σ this is measured
+    /// in, and under the floor `sigma_min` less still. At 0.6 rather than 1.0, DAVIS
+    /// lucia without person-free frames went from IoU 0.894 to 0.903 over tennis and
+    /// from 0.843 to 0.891 over dance-twirl (her dark grey dress over the asphalt),
+    /// the other composites within +0.003; vtest.mp4's real shadows and scene: median
+    /// frame 0.045% → 0.059% foreground, mean 2.50% → 2.57%. At 0.5: 0.905 and 0.897;
+    /// at 0.4 and below shadows are all but never found.
     pub shadow_max_texture: f32,
 }
 
@@ -101,7 +108,7 @@ impl Default for BackgroundOptions {
             shadows: true,
             shadow_min_brightness: 0.55,
             shadow_max_chroma: 2.0,
-            shadow_max_texture: 1.0,
+            shadow_max_texture: 0.6,
         }
     }
 }
