@@ -89,8 +89,8 @@ pub struct BackgroundOptions {
     pub shadow_max_chroma: f32,
     /// … and around them the frame is the scene times one factor, up to this many
     /// times the noise (infinite: colour alone decides). A shadow's residual is the
-    /// camera's noise in brightness, about 0.6 of the per-channel σ this is measured
-    /// in, and under the floor `sigma_min` less still. At 0.6 rather than 1.0, DAVIS
+    /// camera's noise in brightness, about two thirds of the per-channel σ it is
+    /// compared with, and under the floor `sigma_min` less still. At 0.6, not 1.0, DAVIS
     /// lucia without person-free frames went from IoU 0.894 to 0.903 over tennis and
     /// from 0.843 to 0.891 over dance-twirl (her dark grey dress over the asphalt),
     /// the other composites within +0.003; vtest.mp4's real shadows and scene: median
