@@ -28,8 +28,8 @@
 //! composites went from 0.813 / 0.958 / 0.940 / 0.660 / 0.944 / 0.921 to 0.830 /
 //! 0.960 / 0.952 / 0.765 / 0.951 / 0.924 (lucia's two went on to 0.894 and 0.843
 //! with more pixels taken for unknown, see [`Refiner`]); on vtest.mp4 the test gives
-//! back to the walkers about 70% of the pixels colour alone had called shadow, mostly their dark
-//! clothes and blurred outlines. At 0.7 times the noise rather than 1, lucia scored
+//! back to the walkers about 70% of the pixels colour alone had called shadow, mostly
+//! their dark clothes and blurred outlines. At 0.7 times the noise rather than 1, lucia scored
 //! 0.850 and 0.869, but the faint shadows between a walker's feet in vtest.mp4 turned
 //! foreground too. Measured again with today's model and not kept: at 0.6, lucia
 //! without person-free frames rose from 0.894 to 0.903 over tennis and from 0.843 to

@@ -159,6 +159,15 @@ mod tests {
         }
     }
 
+    /// Clears the pixels of `xs` × `ys`.
+    fn clear(m: &mut Mask, xs: std::ops::Range<u32>, ys: std::ops::Range<u32>) {
+        for y in ys {
+            for x in xs.clone() {
+                m.set(x, y, false);
+            }
+        }
+    }
+
     #[test]
     fn drops_noise_and_far_blobs_keeps_a_detached_limb_and_fills_small_holes() {
         let mut m = Mask::new(200, 120);
@@ -166,11 +175,7 @@ mod tests {
         rect(&mut m, 114, 30, 120, 60); // a detached arm, 3 px away
         rect(&mut m, 5, 5, 25, 30); // a passer-by far away
         m.set(150, 110, true); // noise
-        for y in 50..54 {
-            for x in 90..94 {
-                m.set(x, y, false); // a hole in the torso
-            }
-        }
+        clear(&mut m, 90..94, 50..54); // a hole in the torso
         clean(&mut m, &CleanupOptions::default());
         assert!(m.get(117, 45), "detached arm kept");
         assert!(!m.get(15, 15), "far blob dropped");
@@ -185,11 +190,7 @@ mod tests {
         // at its side: filled when the middle is unknown, left open otherwise.
         let mut m = Mask::new(240, 240);
         rect(&mut m, 100, 40, 140, 200);
-        for y in 80..120 {
-            for x in 110..141 {
-                m.set(x, y, false);
-            }
-        }
+        clear(&mut m, 110..141, 80..120);
         for y in 80..120 {
             if y != 100 {
                 m.set(140, y, true);
@@ -214,20 +215,13 @@ mod tests {
         // A ring whose inside is 40% of its area: an arm looped to the hip.
         let mut m = Mask::new(100, 100);
         rect(&mut m, 20, 20, 80, 80);
-        for y in 35..66 {
-            for x in 35..66 {
-                m.set(x, y, false);
-            }
-        }
+        clear(&mut m, 35..66, 35..66);
         clean(&mut m, &CleanupOptions::default());
         assert!(!m.get(50, 50));
         // A slit 2 pixels wide, 3% of the area: an arm held close to the body.
         let mut m = Mask::new(100, 100);
         rect(&mut m, 20, 20, 80, 80);
-        for y in 25..75 {
-            m.set(70, y, false);
-            m.set(71, y, false);
-        }
+        clear(&mut m, 70..72, 25..75);
         clean(&mut m, &CleanupOptions::default());
         assert!(!m.get(70, 50) && !m.get(71, 30), "the gap stays open");
         let mut empty = Mask::new(10, 10);
