@@ -160,6 +160,60 @@ impl Mask {
         }
     }
 
+    /// The mask dilated by a (2r+1)×(2r+1) square (the L∞ ball of radius r), word
+    /// by word: each row ORed with its shifts by up to r pixels, then each output
+    /// row the OR of the 2r+1 rows around it.
+    pub fn dilated_square(&self, r: u32) -> Mask {
+        let stride = self.stride;
+        let tail = match self.width % 64 {
+            0 => !0u64,
+            bits => (1u64 << bits) - 1,
+        };
+        let mut wide = vec![0u64; self.words.len()];
+        for (src, dst) in self.words.chunks(stride).zip(wide.chunks_mut(stride)) {
+            dst.copy_from_slice(src);
+            for k in 1..=r.min(self.width) as usize {
+                let (words, bits) = (k / 64, (k % 64) as u32);
+                for (i, d) in dst.iter_mut().enumerate() {
+                    // Towards higher x: bit j of the source lands on j + k.
+                    let from = |j: usize| src.get(j).copied().unwrap_or(0);
+                    if i >= words {
+                        let lo = from(i - words);
+                        let carry = if bits > 0 && i > words {
+                            from(i - words - 1) >> (64 - bits)
+                        } else {
+                            0
+                        };
+                        *d |= (lo << bits) | carry;
+                    }
+                    // Towards lower x: bit j lands on j - k.
+                    let hi = from(i + words);
+                    let carry = if bits > 0 {
+                        from(i + words + 1) << (64 - bits)
+                    } else {
+                        0
+                    };
+                    *d |= (hi >> bits) | carry;
+                }
+            }
+            if let Some(last) = dst.last_mut() {
+                *last &= tail;
+            }
+        }
+        let mut out = Mask::new(self.width, self.height);
+        let h = self.height as usize;
+        for y in 0..h {
+            let (y0, y1) = (y.saturating_sub(r as usize), (y + r as usize).min(h - 1));
+            let dst = &mut out.words[y * stride..(y + 1) * stride];
+            for row in wide[y0 * stride..(y1 + 1) * stride].chunks(stride) {
+                for (d, s) in dst.iter_mut().zip(row) {
+                    *d |= s;
+                }
+            }
+        }
+        out
+    }
+
     /// An 8-bit image, 255 where set and 0 elsewhere.
     pub fn to_gray(&self) -> GrayImage {
         GrayImage::from_fn(self.width, self.height, |x, y| {
@@ -592,6 +646,34 @@ mod tests {
         assert_eq!(m.count(), 329);
         let g = m.to_gray();
         assert_eq!(Mask::from_gray(&g, 128), m);
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn square_dilation_matches_imageproc(
+            w in 1u32..200,
+            h in 1u32..40,
+            r in 0u32..140,
+            seeds in proptest::collection::vec((0u32..200, 0u32..40), 1..12),
+        ) {
+            let mut m = Mask::new(w, h);
+            for (x, y) in seeds {
+                m.set(x % w, y % h, true);
+            }
+            let expect = imageproc::morphology::dilate(
+                &m.to_gray(),
+                imageproc::distance_transform::Norm::LInf,
+                r.min(255) as u8,
+            );
+            proptest::prop_assert_eq!(m.dilated_square(r), Mask::from_gray(&expect, 128));
+        }
+    }
+
+    #[test]
+    fn an_empty_mask_dilates_to_an_empty_mask() {
+        let m = Mask::new(100, 50);
+        assert_eq!(m.dilated_square(5), m);
+        assert_eq!(m.dilated_square(0), m);
     }
 
     /// A body of one sphere, to check the projection against a closed form.

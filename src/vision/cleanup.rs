@@ -2,7 +2,6 @@
 //! blob filtering that keeps the person's detached pieces, and hole filling.
 
 use imageproc::distance_transform::Norm;
-use imageproc::morphology::dilate;
 
 use super::blobs::{Blobs, Connectivity};
 
@@ -115,7 +114,7 @@ fn fill_unknown_bays(mask: &mut Mask, unknown: &Mask) {
 pub fn person_region(clean: &Mask, grow: u8) -> Mask {
     let mut m = clean.clone();
     fill_holes(&mut m, f64::INFINITY, None);
-    Mask::from_gray(&dilate(&m.to_gray(), Norm::LInf, grow), 128)
+    m.dilated_square(grow as u32)
 }
 
 /// Fills background regions that do not reach the image border and are at most
