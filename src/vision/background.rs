@@ -16,8 +16,8 @@
 //!   frame the refiner compares, the pixel's colours with the person's and the
 //!   scene's around them. Method.md suggests the per-pixel median, right only where
 //!   the person is absent in more than half the frames; on the DAVIS benchmark
-//!   without person-free frames the median scores IoU 0.765 / 0.868 / 0.902 (lucia,
-//!   dance-twirl, tennis) and this model 0.894 / 0.959 / 0.952
+//!   without person-free frames the median scores IoU 0.689 / 0.880 / 0.919 (lucia,
+//!   dance-twirl, tennis) and this model 0.898 / 0.978 / 0.974
 //!   (`tests/silhouette_quality.rs` measures both).
 //!
 //! A shadow must keep the scene's texture as well as its chromaticity
@@ -42,7 +42,8 @@
 //! samples of 3 bytes, running statistics of the person-free frames, the first
 //! frame), at most about as much again while a whole-clip model finishes: 53 MB at
 //! 854×480, some 2 GB at the 3840×2160 cap of [`crate::clip::Limits`]. The refining
-//! pass keeps each pixel's colour clusters, 12 bytes.
+//! passes keep each pixel's colour clusters (12 bytes) and, to tell when the model
+//! settles, the previous pass's model.
 
 use image::RgbImage;
 
@@ -401,13 +402,16 @@ impl BackgroundBuilder {
 /// every frame lifted lucia to 0.89–0.90 but took three others down to 0.89–0.91
 /// (scenes with still people of their own), so unknown pixels only fill holes.
 ///
+/// [`crate::vision::silhouette::Segmenter::learn`] refines the model again with
+/// the silhouettes it gives, until it settles.
+///
 /// A foreground nearly empty in most frames means a person who stayed on one spot
 /// (or none): see [`still_person`] and [`refine_still`] (the synthetic dance: IoU
 /// 0.017 → 0.816 with the region alone → 0.961 corrected by colour).
-pub struct Refiner {
+pub struct Refiner<'a> {
     base: BackgroundModel,
     acc: Vec<Running>,
-    candidates: Option<Candidates>,
+    candidates: Option<&'a Candidates>,
     odds: ColourOdds,
     /// Per pixel, the frames whose raw foreground held it …
     moved: Vec<u16>,
@@ -476,8 +480,8 @@ const SIGMA_CAP: f32 = 2.0;
 /// Fewest outside-the-person samples that replace the first estimate.
 const MIN_REFINE_SAMPLES: u32 = 2;
 
-impl Refiner {
-    pub fn new(base: BackgroundModel, candidates: Option<Candidates>) -> Refiner {
+impl<'a> Refiner<'a> {
+    pub fn new(base: BackgroundModel, candidates: Option<&'a Candidates>) -> Refiner<'a> {
         let n = base.mean.len();
         Refiner {
             base,
@@ -505,7 +509,7 @@ impl Refiner {
             if raw.get(x, y) {
                 self.moved[i] = self.moved[i].saturating_add(1);
             }
-            if let Some(c) = &self.candidates {
+            if let Some(c) = self.candidates {
                 // Where one colour holds nearly all the clip the scene is sure: the
                 // foreground there is the person, the band around them the scene.
                 let top = c.per_pixel[i].iter().map(|c| c.n as usize).max();
@@ -533,7 +537,7 @@ impl Refiner {
             let learned = (r.n >= MIN_REFINE_SAMPLES).then_some(r);
             // The most scene-like of the pixel's colour clusters, if it looks like
             // the scene rather than the person.
-            let scene_like = self.candidates.as_ref().and_then(|c| {
+            let scene_like = self.candidates.and_then(|c| {
                 c.per_pixel[i]
                     .iter()
                     .filter(|c| c.n >= MIN_CANDIDATE_SAMPLES)
@@ -583,7 +587,7 @@ impl Refiner {
         let mut shares = self.shares;
         if median(&mut shares).is_some_and(|m| (m as f64) < MIN_MEDIAN_FOREGROUND) {
             model.still = still_person(&self.moved, model.width, model.height);
-            if let (Some(still), Some(c)) = (model.still.as_mut(), &self.candidates) {
+            if let (Some(still), Some(c)) = (model.still.as_mut(), self.candidates) {
                 refine_still(still, &self.moved, c, &mut model.mean, &mut unknown);
             }
         }
@@ -1075,6 +1079,22 @@ impl BackgroundModel {
         }
     }
 
+    /// The share of the pixels on which `other` differs from this model: unknown in
+    /// one of them only, or a mean apart by more than [`JOIN`] on some channel.
+    pub fn changed_share(&self, other: &BackgroundModel) -> f64 {
+        let unknown = |m: &BackgroundModel, i: usize| {
+            m.unknown
+                .as_ref()
+                .is_some_and(|u| u.get(i as u32 % m.width, i as u32 / m.width))
+        };
+        let changed = (0..self.mean.len())
+            .filter(|&i| {
+                unknown(self, i) != unknown(other, i) || linf(&self.mean[i], &other.mean[i]) > JOIN
+            })
+            .count();
+        changed as f64 / self.mean.len().max(1) as f64
+    }
+
     /// The model's mean as an image (for debugging and reports).
     pub fn mean_image(&self) -> RgbImage {
         let w = self.width as usize;
@@ -1205,6 +1225,22 @@ mod tests {
     }
 
     #[test]
+    fn changed_share_counts_moved_means_and_flipped_unknowns() {
+        let mut builder = BackgroundBuilder::new(10, 10, EmptyFrames::None);
+        builder.push(&scene(10, 10, 2, 0));
+        let a = builder.finish();
+        assert_eq!(a.changed_share(&a), 0.0);
+        let mut b = a.clone();
+        b.mean[3][1] += JOIN + 1.0;
+        b.mean[4][0] += JOIN - 1.0;
+        let mut unknown = Mask::new(10, 10);
+        unknown.set(7, 7, true);
+        b.unknown = Some(unknown);
+        assert_eq!(a.changed_share(&b), 0.02);
+        assert_eq!(b.changed_share(&a), 0.02);
+    }
+
+    #[test]
     fn a_pixel_whose_colour_outside_the_person_wanders_is_unknown() {
         // A first silhouette missed a dress over x = 10..20 (its colour shifts by up
         // to 60 levels from frame to frame): the refiner sees it "outside the person"
@@ -1212,7 +1248,7 @@ mod tests {
         // steady scene known.
         let base = BackgroundBuilder::new(40, 30, EmptyFrames::None);
         let (model, candidates) = base.finish_with_candidates();
-        let mut refiner = Refiner::new(model, candidates);
+        let mut refiner = Refiner::new(model, candidates.as_ref());
         let empty = Mask::new(40, 30);
         for f in 0..12u32 {
             let mut img = scene(40, 30, 2, f);
