@@ -30,8 +30,10 @@ pub struct Blobs {
 impl Blobs {
     /// Labels the regions of pixels equal to `value`: the rows' runs of such pixels,
     /// joined (union–find) with the runs they touch in the row above; regions are
-    /// numbered in the raster order of their first pixel. Some 20× faster than a
-    /// pixel-by-pixel flood fill (which the tests keep as the reference).
+    /// numbered in the raster order of their first pixel. In a refining pass over
+    /// vtest.mp4, the clean-up and the person's regions (mostly labelling) took
+    /// 1.4–1.8 s instead of 11–13 s with a pixel-by-pixel flood fill, which the
+    /// tests keep as the reference.
     pub fn label(mask: &Mask, value: bool, connectivity: Connectivity) -> Blobs {
         let (w, h) = (mask.width(), mask.height());
         // Runs as (y, x0, x1) inclusive, row by row; `rows[y]` is where row y's start.
