@@ -33,8 +33,9 @@ fn mean_iou(
     .unwrap();
     let mut out = Mask::new(w, h);
     let (mut sum, mut n, mut worst) = (0.0, 0usize, 1.0f64);
+    let mut sequence = seg.sequence();
     for (f, t) in frames.iter().zip(truth) {
-        seg.silhouette(f, &mut out);
+        sequence.next(f, &mut out);
         if let Some(t) = t {
             let iou = out.iou(t);
             sum += iou;
@@ -168,6 +169,7 @@ fn median_iou(frames: &[RgbImage], truth: &[Option<Mask>]) -> f64 {
             frames: frames.len(),
         },
         unknown: None,
+        unseen: None,
         still: None,
     };
     let opts = SilhouetteOptions::default();
@@ -184,31 +186,12 @@ fn median_iou(frames: &[RgbImage], truth: &[Option<Mask>]) -> f64 {
     sum / k as f64
 }
 
-/// Cases known to fall short of the target, and why. Without person-free frames
-/// the scene behind a pixel is learned only from frames in which the person has
-/// moved off it, or guessed from colour where they never do: lucia's torso covers
-/// a quarter of her area in every frame (the camera follows her; 23% of her pixels
-/// over the clip lie on pixels she covers in every frame); over dance-twirl's grey
-/// asphalt, parts of lucia's dark grey dress still pass for shadow. Each with a floor
-/// a little under its current figure (0.898, 0.890) so that it cannot silently get
-/// worse.
-const KNOWN_SHORT: [(&str, f64); 2] = [
-    ("lucia over tennis with 0 person-free frames", 0.89),
-    ("lucia over dance-twirl with 0 person-free frames", 0.88),
-];
-
-/// Fails listing every result under its target, or under its floor for the known
-/// shortfalls (after all were printed).
+/// Fails listing every result under its target (after all were printed).
 fn check(results: &[(String, f64, f64)]) {
     let short: Vec<String> = results
         .iter()
-        .filter_map(|(what, iou, target)| {
-            let need = KNOWN_SHORT
-                .iter()
-                .find(|(k, _)| *k == what.as_str())
-                .map_or(*target, |(_, floor)| *floor);
-            (!(iou.is_finite() && *iou >= need)).then(|| format!("{what}: {iou:.3} < {need}"))
-        })
+        .filter(|(_, iou, target)| !(iou.is_finite() && iou >= target))
+        .map(|(what, iou, target)| format!("{what}: {iou:.3} < {target}"))
         .collect();
     assert!(short.is_empty(), "below target: {}", short.join("; "));
 }

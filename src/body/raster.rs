@@ -135,6 +135,14 @@ impl Mask {
         }
     }
 
+    /// Keeps only the pixels also set in `other`.
+    pub fn and_with(&mut self, other: &Mask) {
+        self.same_size(other);
+        for (a, b) in self.words.iter_mut().zip(&other.words) {
+            *a &= b;
+        }
+    }
+
     /// Pixels set in both.
     pub fn and_count(&self, other: &Mask) -> u64 {
         self.same_size(other);

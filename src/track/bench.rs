@@ -235,11 +235,12 @@ pub fn run_clip(
             Ok::<_, ()>(())
         })
         .map_err(|_| anyhow::anyhow!("segmenting"))?;
+        let mut sequence = seg.sequence();
         frames
             .iter()
             .map(|f| {
                 let mut m = Mask::new(w, h);
-                seg.silhouette(f, &mut m);
+                sequence.next(f, &mut m);
                 m
             })
             .collect()

@@ -87,12 +87,21 @@ impl Segmenter {
                 // From the second pass on, the silhouettes the previous pass's model
                 // gives (unknown bays filled) tell the person from the scene.
                 let mut refiner = Refiner::new(model, candidates.as_ref());
+                // Each frame's silhouette as the final pass gives it: with the
+                // previous frame's ([`Sequence`]).
+                let mut prev: Option<(RgbImage, Mask)> = None;
                 pass(&mut |f| {
                     let base = refiner.base();
                     base.foreground(f, &opts.background, &mut raw);
                     let mut clean = raw.clone();
+                    if let Some((prev_frame, prev_mask)) = &prev {
+                        base.hold_unknown(f, prev_frame, prev_mask, &opts.background, &mut clean);
+                    }
                     clean_with_unknown(&mut clean, &opts.cleanup, base.unknown.as_ref());
                     let share = clean.count() as f32 / (width as f32 * height as f32).max(1.0);
+                    if base.unseen.as_ref().is_some_and(|u| u.count() > 0) {
+                        remember(&mut prev, f, &clean);
+                    }
                     let person = person_region(&clean, grow);
                     let around = person.dilated_square(grow as u32);
                     refiner.push(f, &raw, &person, &around, share);
@@ -113,10 +122,54 @@ impl Segmenter {
         })
     }
 
-    /// The cleaned silhouette of one frame.
+    /// The cleaned silhouette of one frame, judged alone (a clip's frames in order:
+    /// [`Segmenter::sequence`]).
     pub fn silhouette(&self, frame: &RgbImage, out: &mut Mask) {
         self.model.foreground(frame, &self.opts.background, out);
         clean_with_unknown(out, &self.opts.cleanup, self.model.unknown.as_ref());
+    }
+
+    /// Segments a clip's frames in order, each with what the previous one showed
+    /// ([`BackgroundModel::hold_unknown`]).
+    pub fn sequence(&self) -> Sequence<'_> {
+        Sequence {
+            seg: self,
+            prev: None,
+        }
+    }
+}
+
+/// A clip's frames segmented in order ([`Segmenter::sequence`]). Keeps the previous
+/// frame and its silhouette when the model has pixels it never saw outside the
+/// person (a background learned from the whole clip); nothing otherwise.
+pub struct Sequence<'a> {
+    seg: &'a Segmenter,
+    prev: Option<(RgbImage, Mask)>,
+}
+
+impl Sequence<'_> {
+    /// The cleaned silhouette of the clip's next frame.
+    pub fn next(&mut self, frame: &RgbImage, out: &mut Mask) {
+        let (model, opts) = (&self.seg.model, &self.seg.opts);
+        model.foreground(frame, &opts.background, out);
+        if let Some((prev_frame, prev_mask)) = &self.prev {
+            model.hold_unknown(frame, prev_frame, prev_mask, &opts.background, out);
+        }
+        clean_with_unknown(out, &opts.cleanup, model.unknown.as_ref());
+        if model.unseen.as_ref().is_some_and(|u| u.count() > 0) {
+            remember(&mut self.prev, frame, out);
+        }
+    }
+}
+
+/// Keeps `frame` and its silhouette in `prev`, reusing its buffers.
+fn remember(prev: &mut Option<(RgbImage, Mask)>, frame: &RgbImage, mask: &Mask) {
+    match prev {
+        Some((f, m)) => {
+            f.clone_from(frame);
+            m.clone_from(mask);
+        }
+        None => *prev = Some((frame.clone(), mask.clone())),
     }
 }
 
@@ -259,9 +312,10 @@ pub fn clip_silhouettes(
     })?;
     let mut src = open(path, limits)?;
     let mut mask = Mask::new(w, h);
+    let mut sequence = seg.sequence();
     while let Some(f) = src.next_frame()? {
         check_frame(&f)?;
-        seg.silhouette(&f, &mut mask);
+        sequence.next(&f, &mut mask);
         shares.push(mask.count() as f32 / area);
         each(frames, &f, &mask)?;
         frames += 1;
