@@ -9,11 +9,12 @@
 //! frame with the input mask and the model's silhouette tinted over it.
 //!
 //! ```text
-//! cargo run --release --example davis_track [picture.png] [--reward-rim N]
+//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N]
 //! ```
 //!
-//! `--reward-rim N` tracks with that reward rim (`Weights::reward_rim`; 0, the
-//! paper's objective, by default).
+//! `--track-rewards` pays the edge and region rewards while tracking too (the
+//! paper's objective, `Weights::track_rewards`), `--reward-rim N` then withholds them
+//! near the outline (`Weights::reward_rim`).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -82,9 +83,12 @@ fn main() -> Result<()> {
     }
     let mut picture = root.join("docs/davis_tracking.png");
     let mut reward_rim = 0.0;
+    let mut track_rewards = false;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
-        if a == "--reward-rim" {
+        if a == "--track-rewards" {
+            track_rewards = true;
+        } else if a == "--reward-rim" {
             let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
             match v {
                 Some(v) if v.is_finite() && v >= 0.0 => reward_rim = v,
@@ -111,7 +115,7 @@ fn main() -> Result<()> {
             println!("{seq}: {} not found, skipped", dir.display());
             continue;
         }
-        match run_sequence(seq, &dir, &tmp, reward_rim) {
+        match run_sequence(seq, &dir, &tmp, track_rewards, reward_rim) {
             Ok(r) => results.push(r),
             Err(e) => {
                 outcome = Err(e.context(format!("sequence {seq}")));
@@ -187,7 +191,13 @@ fn read_mask(path: &Path) -> Result<(Mask, [u64; 3])> {
     Ok((Mask::from_gray(&gray, 128), hist))
 }
 
-fn run_sequence(seq: &str, dir: &Path, tmp: &Path, reward_rim: f64) -> Result<SeqResult> {
+fn run_sequence(
+    seq: &str,
+    dir: &Path,
+    tmp: &Path,
+    track_rewards: bool,
+    reward_rim: f64,
+) -> Result<SeqResult> {
     let masks = list(&dir.join("masks"), "png")?;
     let frames = list(&dir.join("frames"), "jpg")?;
     if masks.is_empty() {
@@ -208,6 +218,7 @@ fn run_sequence(seq: &str, dir: &Path, tmp: &Path, reward_rim: f64) -> Result<Se
         ..ClipTrackOptions::default()
     };
     opts.track.weights.reward_rim = reward_rim;
+    opts.track.weights.track_rewards = track_rewards;
     let t0 = Instant::now();
     let mut done = 0usize;
     let clip: ClipTrack = track_clip(&zip_path, &opts, |_, _| {

@@ -126,8 +126,12 @@ struct WeightArgs {
     /// Weight of the arm/leg region term (Eq. 6).
     #[arg(long, default_value_t = 20.0)]
     w_region: f64,
-    /// Pixels of the silhouette this close to its outline earn no edge or region
-    /// reward while tracking (0: the paper's objective; 2 keeps the model at the
+    /// Pay the edge and region rewards while tracking too, not only in the
+    /// initialisation (the paper's objective)
+    #[arg(long)]
+    track_rewards: bool,
+    /// With --track-rewards: pixels of the silhouette this close to its outline
+    /// earn no edge or region reward while tracking (2 keeps the model at the
     /// person's depth from a right start)
     #[arg(long, default_value_t = 0.0)]
     reward_rim: f64,
@@ -149,6 +153,7 @@ impl WeightArgs {
         w.extremity = self.w_extremity;
         w.region = self.w_region;
         w.reward_rim = self.reward_rim;
+        w.track_rewards = self.track_rewards;
         Ok(())
     }
 }

@@ -529,9 +529,11 @@ fn a_bow_towards_the_camera_is_tracked_mostly_in_the_trunk() {
 /// The Bandai walk seen from azimuth −120°, tracked from its true first shape and
 /// pose on its true silhouettes (`monocap bench --only walk_normal --azimuths=-120
 /// --lead-in 10 --oracle-init --true-silhouettes`), with and without the joint
-/// polish: the group-by-group search loses the walker (the groups compensate for
-/// each other and no single group can improve), the polish over all parameters at
-/// once keeps far more of them (IoU 0.678 and 0.834 when measured).
+/// polish: the group-by-group search loses part of the walker (the groups
+/// compensate for each other and no single group can improve), the polish over all
+/// parameters at once keeps more of them. Measured IoU 0.810 and 0.901 (0.678 and
+/// 0.834 when the edge and region rewards were paid while tracking, which pulled the
+/// group search further off).
 #[test]
 fn the_joint_polish_keeps_a_walker_the_group_search_alone_loses() {
     use monocap::track::bench::{run_clip, BenchOptions};
@@ -558,7 +560,7 @@ fn the_joint_polish_keeps_a_walker_the_group_search_alone_loses() {
     };
     let (without, with) = (iou(0), iou(1000));
     println!("walk from azimuth -120 from its true start: model IoU {without:.3} without the polish, {with:.3} with it");
-    assert!(with > without + 0.1, "{without:.3} -> {with:.3}");
+    assert!(with > without + 0.05, "{without:.3} -> {with:.3}");
 }
 
 /// A person turned 70° from where the model was left (a turn faster than the

@@ -29,8 +29,13 @@ pub struct JobOptions {
     pub w_region: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_core: Option<f64>,
-    /// Pixels near the silhouette's outline that earn no edge or region reward while
-    /// tracking (default 0, the paper's objective; see `Weights::reward_rim`).
+    /// Pay the edge and region rewards while tracking too, not only in the
+    /// initialisation (the paper's objective; default false, see
+    /// `Weights::track_rewards`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub track_rewards: Option<bool>,
+    /// With `track_rewards`: pixels near the silhouette's outline that earn no edge
+    /// or region reward while tracking (default 0; see `Weights::reward_rim`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub reward_rim: Option<f64>,
     /// Frame to initialise on (default: chosen automatically).
@@ -122,6 +127,9 @@ impl JobOptions {
                 }
                 *slot = v;
             }
+        }
+        if let Some(t) = self.track_rewards {
+            o.track.weights.track_rewards = t;
         }
         o.track.init_frame = self.init_frame;
         if let Some(text) = &self.frames {

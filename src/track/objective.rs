@@ -41,8 +41,13 @@ pub struct Weights {
     /// slightly larger than the person cheaper than one of their size, so over
     /// frames the model creeps nearer the camera and bends to keep its image. See
     /// [`crate::track::tracker::TrackOptions::weights`] for where it applies and its
-    /// figures.
+    /// figures. Only with [`Weights::track_rewards`]: without, no pixel earns them
+    /// while tracking.
     pub reward_rim: f64,
+    /// Pay the edge and region rewards while tracking too, not only in the
+    /// initialisation (the paper's objective; off by default). See
+    /// [`crate::track::tracker::TrackOptions::weights`].
+    pub track_rewards: bool,
 }
 
 impl Default for Weights {
@@ -52,6 +57,18 @@ impl Default for Weights {
             extremity: 20.0,
             region: 20.0,
             reward_rim: 0.0,
+            track_rewards: false,
+        }
+    }
+}
+
+impl Weights {
+    /// The paper's objective: edge and region rewards wherever the features put
+    /// them, while tracking as in the initialisation.
+    pub fn paper() -> Weights {
+        Weights {
+            track_rewards: true,
+            ..Weights::default()
         }
     }
 }
@@ -76,8 +93,9 @@ pub struct Target {
     pub silhouette: Mask,
     /// Height of the person's bounding box in pixels (0 when there is no person).
     pub body_height: f64,
-    /// The rewards a reward rim ([`Weights::reward_rim`]) withheld: pixel index,
-    /// edge reward, region reward (negative; 0 when none). Empty without a rim.
+    /// The rewards withheld while tracking (all of them without
+    /// [`Weights::track_rewards`], those of the reward rim [`Weights::reward_rim`]
+    /// with): pixel index, edge reward, region reward (negative; 0 when none).
     withheld: Vec<(usize, f32, f32)>,
 }
 
@@ -89,6 +107,11 @@ impl Target {
         let mut limb_gain = vec![0f32; f.coremap.len()];
         let mut base = 0.0;
         let mut withheld = Vec::new();
+        let rim = if w.track_rewards {
+            w.reward_rim
+        } else {
+            f64::INFINITY
+        };
         for y in 0..height {
             for x in 0..width {
                 let i = (y * width + x) as usize;
@@ -110,8 +133,9 @@ impl Target {
                 } else {
                     0.0
                 };
-                // Off the outline's rim (all of it when the rim is 0).
-                if f.inside[i] as f64 > w.reward_rim {
+                // Off the outline's rim (all of it when the rim is 0, none of it
+                // when rewards are not paid while tracking).
+                if f.inside[i] as f64 > rim {
                     g += edge;
                     limb_gain[i] = region;
                 } else if edge != 0.0 || region != 0.0 {
@@ -146,8 +170,9 @@ impl Target {
         }
     }
 
-    /// The same frame under the paper's objective, the rewards a reward rim withheld
-    /// given back; None when nothing was withheld (the target already is).
+    /// The same frame under the paper's objective (the initialisation's), the
+    /// rewards withheld while tracking given back; None when nothing was withheld
+    /// (the target already is).
     pub fn paper(&self) -> Option<Target> {
         if self.withheld.is_empty() {
             return None;
@@ -334,7 +359,8 @@ impl<'a> Evaluator<'a> {
         render_parts(self.body, &self.posed, self.cam, &all, out);
     }
 
-    /// The terms of F at `pose`, computed pixel by pixel (slow; for reports and tests).
+    /// The terms of the paper's F at `pose` (every edge and region pixel rewarded, as
+    /// in the initialisation), computed pixel by pixel (slow; for reports and tests).
     pub fn terms(&mut self, pose: &Pose, features: &FrameFeatures) -> Terms {
         let mut m = Mask::new(self.cam.width, self.cam.height);
         self.render(pose, &mut m);
@@ -579,7 +605,7 @@ mod tests {
         let mut m = Mask::new(cam.width, cam.height);
         crate::body::raster::render_mask(body, &posed, cam, &mut m);
         let f = compute(&m, None, None, &FeatureOptions::default());
-        let t = Target::new(&f, &Weights::default());
+        let t = Target::new(&f, &Weights::paper());
         (f, t)
     }
 
@@ -587,7 +613,7 @@ mod tests {
     fn fast_cost_matches_the_pixel_by_pixel_terms() {
         let (body, cam, pose) = scene();
         let (f, target) = target_of(&body, &cam, &pose);
-        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), None);
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::paper(), None);
         let mut other = pose;
         other[ix::L_ELBOW] = 60.0;
         other[ix::ROOT_TX] += 7.0;
@@ -617,7 +643,7 @@ mod tests {
     fn own_render_is_near_the_minimum_and_cost_grows_as_a_limb_moves_away() {
         let (body, cam, pose) = scene();
         let (f, target) = target_of(&body, &cam, &pose);
-        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), None);
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::paper(), None);
         let own = ev.terms(&pose, &f);
         assert_eq!(own.xor, 0.0, "the model's own silhouette has no mismatch");
         assert!(ev.iou(&pose) > 0.999);
@@ -640,7 +666,7 @@ mod tests {
         let (f, paper) = target_of(&body, &cam, &pose);
         let w = Weights {
             reward_rim: 2.0,
-            ..Weights::default()
+            ..Weights::paper()
         };
         let rim = Target::new(&f, &w);
         let (mut outline_rewards, mut deep_regions) = (0, 0);
@@ -675,12 +701,39 @@ mod tests {
     }
 
     #[test]
+    fn by_default_tracking_pays_no_rewards_and_the_initialisation_all() {
+        let (body, cam, pose) = scene();
+        let (f, paper) = target_of(&body, &cam, &pose);
+        let tracking = Target::new(&f, &Weights::default());
+        let mut rewarded = 0;
+        for (i, &d) in f.coremap.iter().enumerate() {
+            let inside = paper
+                .silhouette
+                .get(i as u32 % cam.width, i as u32 / cam.width);
+            // Only the XOR term: −d inside the silhouette, d outside.
+            assert_eq!(tracking.gain[i], if inside { -d } else { d }, "pixel {i}");
+            assert_eq!(tracking.limb_gain[i], 0.0, "pixel {i}");
+            rewarded += usize::from(paper.gain[i] != tracking.gain[i] || paper.limb_gain[i] < 0.0);
+        }
+        assert!(rewarded > 500, "{rewarded} rewarded pixels");
+        let back = tracking.paper().expect("rewards withheld");
+        assert_eq!(back.gain, paper.gain);
+        assert_eq!(back.limb_gain, paper.limb_gain);
+        // The reward rim has no say without rewards.
+        let rim = Weights {
+            reward_rim: 2.0,
+            ..Weights::default()
+        };
+        assert_eq!(Target::new(&f, &rim).gain, tracking.gain);
+    }
+
+    #[test]
     fn constraints_make_the_cost_infinite() {
         let (body, cam, pose) = scene();
         let (_, target) = target_of(&body, &cam, &pose);
         let posed = body.posed(&pose);
         let ground = sole_height(&body, &posed);
-        let mut ev = Evaluator::new(&body, &cam, &target, Weights::default(), Some(ground));
+        let mut ev = Evaluator::new(&body, &cam, &target, Weights::paper(), Some(ground));
         assert!(ev.cost(&pose).is_finite());
         let mut bad = pose;
         bad[ix::L_ELBOW] = 170.0; // beyond the elbow's limit
