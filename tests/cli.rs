@@ -316,8 +316,23 @@ fn a_person_who_never_moves_without_person_free_frames_gets_a_warning() {
         &monocap(&["track", s(&still), "-o", s(&dir.path("m.bvh"))]),
         "no person-free frames",
     );
-    // The moving person gets no warning.
+    // The runner running towards the camera keeps within their own footprint: most
+    // of their silhouette lies where no frame showed the scene, and they are told.
     let out = monocap(&["silhouettes", s(&moving), "-o", s(&dir.path("n.zip"))]);
+    assert_success("silhouettes", &out);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        stderr.contains("lies where the clip never showed the scene")
+            && stderr.contains("--empty-frames"),
+        "{stderr}"
+    );
+    // Running across the picture, they show the scene behind them: no warning.
+    let across = dir.path("across.y4m");
+    assert_success(
+        "synth across",
+        &synth(&across, &["--style", "color", "--azimuth-deg", "90"]),
+    );
+    let out = monocap(&["silhouettes", s(&across), "-o", s(&dir.path("a.zip"))]);
     assert_success("silhouettes", &out);
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("warning"), "{stderr}");
