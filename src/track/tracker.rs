@@ -83,9 +83,9 @@ pub struct TrackOptions {
     /// collects them all, so frame after frame it creeps nearer the camera and bends
     /// to keep its image. Without them (the default) the accuracy benchmark went
     /// from PCK@0.1 0.835 to 0.837, with swaps 0.905 → 0.910, PA-MPJPE 143.7 →
-    /// 138.1 mm, model IoU 0.824 → 0.876, lost frames 32 → 33, median 11.8 → 14.3
+    /// 138.1 mm, model IoU 0.824 → 0.876, lost frames 32 → 33, median 12.5 → 13.8
     /// frames/s with a person-free lead-in; 0.640 → 0.659, 0.852 → 0.877, 165.2 →
-    /// 161.8 mm, 0.767 → 0.809, 71 → 32 lost, 11.3 → 12.4 frames/s without; from
+    /// 161.8 mm, 0.767 → 0.809, 71 → 32 lost without; from
     /// the true first shape and pose (`--oracle-init`, lead-in) PCK 0.903, PA-MPJPE
     /// 95.6 mm, IoU 0.919, 10 lost; the DAVIS people tracked from their masks, mean
     /// IoU 0.732 → 0.781. Fitting the shape in the initialisation without them as
