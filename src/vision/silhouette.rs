@@ -2,7 +2,9 @@
 //! (and, without person-free frames, refine it in up to [`MAX_REFINE_PASSES`]
 //! more), then segment and clean each frame in a last pass (method.md §3). Every
 //! pass streams: between them only the background model is kept (see its memory
-//! note), never the frames. A clip of masks skips background subtraction: its frames are
+//! note), never the frames; within a pass, the previous frame and its silhouette
+//! (the pixels the clip never showed empty are judged from frame to frame,
+//! [`Sequence`]). A clip of masks skips background subtraction: its frames are
 //! thresholded as they are.
 
 use image::RgbImage;
@@ -90,6 +92,11 @@ impl Segmenter {
                 // Each frame's silhouette as the final pass gives it: with the
                 // previous frame's ([`Sequence`]).
                 let mut prev: Option<(RgbImage, Mask)> = None;
+                let holds = refiner
+                    .base()
+                    .unseen
+                    .as_ref()
+                    .is_some_and(|u| u.count() > 0);
                 pass(&mut |f| {
                     let base = refiner.base();
                     base.foreground(f, &opts.background, &mut raw);
@@ -99,7 +106,7 @@ impl Segmenter {
                     }
                     clean_with_unknown(&mut clean, &opts.cleanup, base.unknown.as_ref());
                     let share = clean.count() as f32 / (width as f32 * height as f32).max(1.0);
-                    if base.unseen.as_ref().is_some_and(|u| u.count() > 0) {
+                    if holds {
                         remember(&mut prev, f, &clean);
                     }
                     let person = person_region(&clean, grow);
@@ -134,6 +141,7 @@ impl Segmenter {
     pub fn sequence(&self) -> Sequence<'_> {
         Sequence {
             seg: self,
+            holds: self.model.unseen.as_ref().is_some_and(|u| u.count() > 0),
             prev: None,
         }
     }
@@ -144,6 +152,8 @@ impl Segmenter {
 /// person (a background learned from the whole clip); nothing otherwise.
 pub struct Sequence<'a> {
     seg: &'a Segmenter,
+    /// The model has pixels it never saw outside the person.
+    holds: bool,
     prev: Option<(RgbImage, Mask)>,
 }
 
@@ -156,7 +166,7 @@ impl Sequence<'_> {
             model.hold_unknown(frame, prev_frame, prev_mask, &opts.background, out);
         }
         clean_with_unknown(out, &opts.cleanup, model.unknown.as_ref());
-        if model.unseen.as_ref().is_some_and(|u| u.count() > 0) {
+        if self.holds {
             remember(&mut self.prev, frame, out);
         }
     }
