@@ -120,6 +120,13 @@ impl Mask {
         self.words.iter().map(|w| w.count_ones() as u64).sum()
     }
 
+    /// Number of pixels set in both masks.
+    pub fn count_and(&self, other: &Mask) -> u64 {
+        self.same_size(other);
+        let both = self.words.iter().zip(&other.words);
+        both.map(|(a, b)| (a & b).count_ones() as u64).sum()
+    }
+
     fn same_size(&self, other: &Mask) {
         assert!(
             self.width == other.width && self.height == other.height,

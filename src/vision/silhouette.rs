@@ -111,7 +111,7 @@ impl Segmenter {
                     }
                     let person = person_region(&clean, grow);
                     let around = person.dilated_square(grow as u32);
-                    refiner.push(f, &raw, &person, &around, share);
+                    refiner.push(f, &raw, &clean, &person, &around, share);
                 })?;
                 let before = refiner.base().clone();
                 model = refiner.finish();
@@ -264,7 +264,8 @@ impl ClipSilhouettes {
 /// Above this [`ClipSilhouettes::unseen_share`] the silhouettes come with a warning.
 /// Measured without person-free frames: the person's share on never-seen pixels is
 /// 0.79–0.99 where they stay within their own footprint (the synthetic walk and run
-/// towards the camera, the punch and the bow on one spot: silhouettes IoU 0.47–0.97;
+/// towards the camera, the punch and the bow on one spot: silhouettes IoU 0.47–0.99
+/// with [`crate::vision::background::BackgroundModel::linger`];
 /// DAVIS lucia over a still scene: 0.85, IoU 0.915) and 0–0.45 where they move across
 /// the scene (IoU 0.95–0.99).
 pub const MAX_UNSEEN_SHARE: f64 = 0.5;
