@@ -174,6 +174,7 @@ fn median_iou(frames: &[RgbImage], truth: &[Option<Mask>]) -> f64 {
         unseen: None,
         still: None,
         linger: None,
+        person_odds: None,
     };
     let opts = SilhouetteOptions::default();
     let mut out = Mask::new(w, h);
