@@ -767,7 +767,8 @@ fn outline_radius(height: u32) -> u8 {
 ///   (the scene between the limbs, or where the person swayed off) leave it, with
 ///   their background set to that colour: each frame's own test tells there whether
 ///   the person covers them; so do those that never changed and clearly show the
-///   scene (a gap between an arm and the body that the outline enclosed).
+///   scene (a gap between an arm and the body that the outline enclosed; see
+///   [`FREE_ODDS`]).
 ///
 /// The pixels that left it for a colour the scene showed are no longer `unknown`:
 /// that colour was seen there and judged against this person's own colours, so a
@@ -834,7 +835,7 @@ fn refine_still(
                 continue;
             }
             if moved[i] == 0 {
-                if top(i).is_some_and(|c| odds(c) < 1.0 / GROW_ODDS) {
+                if top(i).is_some_and(|c| odds(c) < FREE_ODDS) {
                     grown.set(x, y, false);
                 }
                 continue;
@@ -855,11 +856,18 @@ fn refine_still(
     *still = grown;
 }
 
+/// The odds of a colour being the person's rather than the scene's below which a
+/// pixel of a still person's region that never changed leaves it, when that colour
+/// is its commonest: the scene showing through a slit between an arm held still and
+/// the body. The synthetic dance without person-free frames from the front: IoU 0.969
+/// at odds under 1/4 → 0.993 at odds under 0.35–0.7 (0.987 at 1, 0.967 at 2); from
+/// the other azimuths 0.976 / 0.996 unchanged.
+const FREE_ODDS: f64 = 0.5;
+
 /// How far [`refine_still`] grows the region, in outline radii.
 const GROW_RADII: u32 = 3;
 /// The odds of a colour being the person's rather than the scene's above which
-/// [`refine_still`] grows the region over it (and below whose inverse a pixel that
-/// never changed leaves the region).
+/// [`refine_still`] grows the region over it.
 const GROW_ODDS: f64 = 4.0;
 
 /// A cluster seen in at least this fraction of the frames is a candidate for the
