@@ -1162,7 +1162,8 @@ impl BackgroundModel {
         let likelier_scene = |c: [u8; 3]| {
             self.person_odds
                 .as_ref()
-                .is_some_and(|odds| odds[colour_bin(c)] < 1.0)
+                .and_then(|odds| odds.get(colour_bin(c)))
+                .is_some_and(|&o| o < 1.0)
         };
         let w = self.width as usize;
         for y in 0..self.height {
