@@ -163,7 +163,7 @@ pub struct BackgroundModel {
     /// than the scene's, from the colours the refiner saw where the scene is sure:
     /// [`Self::hold_unknown`] does not hold a pixel whose colour is likelier the
     /// scene's.
-    pub person_odds: Option<Vec<f32>>,
+    pub person_odds: Option<Vec<f64>>,
 }
 
 /// Colours sampled per pixel.
@@ -505,25 +505,20 @@ impl ColourOdds {
         }
     }
 
-    /// [`Self::odds`] for every bin.
-    fn table(&self) -> Vec<f32> {
-        let odds = self.bin_odds();
-        (0..self.person.len()).map(|b| odds(b) as f32).collect()
-    }
-
-    /// A function giving the odds that a colour is the person's rather than the
+    /// Per bin, the odds that a colour in it is the person's rather than the
     /// scene's (equal priors; half a count added to every bin).
-    fn odds(&self) -> impl Fn([u8; 3]) -> f64 + '_ {
-        let odds = self.bin_odds();
-        move |c| odds(colour_bin(c))
-    }
-
-    /// [`Self::odds`] of a bin.
-    fn bin_odds(&self) -> impl Fn(usize) -> f64 + '_ {
+    fn table(&self) -> Vec<f64> {
         let cells = self.person.len() as f64;
         let np = self.person.iter().map(|&v| v as f64).sum::<f64>() + 0.5 * cells;
         let ns = self.scene.iter().map(|&v| v as f64).sum::<f64>() + 0.5 * cells;
-        move |b| ((self.person[b] as f64 + 0.5) / np) / ((self.scene[b] as f64 + 0.5) / ns)
+        let odds = |(&p, &s): (&u64, &u64)| ((p as f64 + 0.5) / np) / ((s as f64 + 0.5) / ns);
+        self.person.iter().zip(&self.scene).map(odds).collect()
+    }
+
+    /// A function giving the odds of [`Self::table`] for a colour.
+    fn odds(&self) -> impl Fn([u8; 3]) -> f64 {
+        let table = self.table();
+        move |c| table[colour_bin(c)]
     }
 }
 
@@ -597,7 +592,8 @@ impl<'a> Refiner<'a> {
     }
 
     pub fn finish(self) -> BackgroundModel {
-        let odds = self.odds.odds();
+        let table = self.odds.table();
+        let odds = |c: [u8; 3]| table[colour_bin(c)];
         let mut model = self.base;
         let mut unknown = Mask::new(model.width, model.height);
         let mut unseen = Mask::new(model.width, model.height);
@@ -681,7 +677,7 @@ impl<'a> Refiner<'a> {
             }
             model.linger = (linger.count() > 0).then_some(linger);
         }
-        model.person_odds = Some(self.odds.table());
+        model.person_odds = Some(table);
         unseen.and_with(&unknown);
         model.unknown = Some(unknown);
         model.unseen = Some(unseen);
@@ -1539,7 +1535,7 @@ mod tests {
         }
         // Where the unseen pixels show a colour likelier the scene's than the
         // person's (the wall an arm uncovered), none is held.
-        let mut odds = vec![1.0f32; BINS * BINS * BINS];
+        let mut odds = vec![1.0; BINS * BINS * BINS];
         odds[colour_bin([61, 59, 60])] = 0.5;
         model.person_odds = Some(odds);
         out.clear();
