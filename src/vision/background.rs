@@ -682,14 +682,15 @@ impl<'a> Refiner<'a> {
             median(&mut unseen_shares).is_some_and(|m| m as f64 > MAX_UNSEEN_SHARE);
         if model.still.is_none() && within_footprint {
             let frames = shares.len();
+            // Within the person's (grown) region in nearly every frame.
+            let persistent = |i: usize| self.covered[i] as usize * 100 >= frames * LINGER_PERCENT;
             let mut linger = Mask::new(model.width, model.height);
-            for (i, &n) in self.covered.iter().enumerate() {
+            for i in 0..self.covered.len() {
                 let colour = model.mean[i].map(|v| v.round().clamp(0.0, 255.0) as u8);
-                if n as usize * 100 >= frames * LINGER_PERCENT && odds(colour) > LINGER_ODDS {
+                if persistent(i) && odds(colour) > LINGER_ODDS {
                     linger.set((i % w) as u32, (i / w) as u32, true);
                 }
             }
-            let persistent = |i: usize| self.covered[i] as usize * 100 >= frames * LINGER_PERCENT;
             linger.or_with(&attached_below(
                 &model.mean,
                 model.width,
@@ -699,10 +700,12 @@ impl<'a> Refiner<'a> {
             model.linger = (linger.count() > 0).then_some(linger);
         }
         model.person_odds = Some(table);
-        // Never seen, and still unknown or clearly the scene: the pixels a still
-        // person's region gave back to the scene are not held.
-        clear_scene.or_with(&unknown);
-        unseen.and_with(&clear_scene);
+        // Never seen stays never seen but for the pixels a still person's region
+        // gave back to the scene (refine_still took them out of `unknown`): those
+        // are not held.
+        let mut not_given_back = clear_scene;
+        not_given_back.or_with(&unknown);
+        unseen.and_with(&not_given_back);
         model.unknown = Some(unknown);
         model.unseen = Some(unseen);
         model
@@ -730,8 +733,8 @@ const LINGER_ODDS: f64 = 20.0;
 /// (legs hang below the torso; the picture on the wall behind the head does not),
 /// reaches down at least half the region's height when it touches the region itself
 /// (a leg, not a stool beside the person; what hangs from a taken part, a shoe, may
-/// be small), keeps off the image's border (the floor and the wall reach it) and the parts
-/// taken stay within [`ATTACH_SIZE`] times the region's area. Like the rest of
+/// be small), keeps off the image's border (the floor and the wall reach it) and the
+/// parts taken stay within [`ATTACH_SIZE`] times the region's area. Like the rest of
 /// [`BackgroundModel::linger`], a part joins a frame's foreground only where it
 /// touches it.
 fn attached_below(
