@@ -135,6 +135,11 @@ struct WeightArgs {
     /// person's depth from a right start)
     #[arg(long, default_value_t = 0.0)]
     reward_rim: f64,
+    /// Weight of the inner outlines against the colour frame's edges, per pixel,
+    /// when choosing between a frame's result and a jump with the same silhouette
+    /// (a depth flip, the legs or arms swapped left for right); 0 for never
+    #[arg(long, default_value_t = monocap::track::objective::OUTLINE_WEIGHT)]
+    w_outline: f64,
 }
 
 impl WeightArgs {
@@ -144,6 +149,7 @@ impl WeightArgs {
             ("--w-extremity", self.w_extremity),
             ("--w-region", self.w_region),
             ("--reward-rim", self.reward_rim),
+            ("--w-outline", self.w_outline),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
@@ -154,6 +160,7 @@ impl WeightArgs {
         w.region = self.w_region;
         w.reward_rim = self.reward_rim;
         w.track_rewards = self.track_rewards;
+        w.outline = self.w_outline;
         Ok(())
     }
 }
@@ -233,6 +240,10 @@ struct BenchArgs {
     /// Start from the true shape and pose (measures tracking apart from initialisation).
     #[arg(long)]
     oracle_init: bool,
+    /// Give the initialisation the true shape: it fits the pose alone (measures
+    /// what the shape fit costs).
+    #[arg(long)]
+    oracle_shape: bool,
     /// Also write every frame's figures to this CSV file (PCK, PA-MPJPE, IoU, cost,
     /// the truth's cost, heading error, depth ratio).
     #[arg(long, value_name = "CSV")]
@@ -540,6 +551,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         duration_s: a.duration_s,
         true_silhouettes: a.true_silhouettes,
         oracle_init: a.oracle_init,
+        oracle_shape: a.oracle_shape,
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;

@@ -29,6 +29,10 @@ pub struct JobOptions {
     pub w_region: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_core: Option<f64>,
+    /// Weight of the inner outlines against the colour frame's edges (default 8,
+    /// see `Weights::outline`; 0 for never).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_outline: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -120,6 +124,7 @@ impl JobOptions {
             ("w_region", self.w_region, &mut w.region),
             ("w_core", self.w_core, &mut o.track.features.core_weight),
             ("reward_rim", self.reward_rim, &mut w.reward_rim),
+            ("w_outline", self.w_outline, &mut w.outline),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {

@@ -72,6 +72,8 @@ pub struct BenchOptions {
     /// Skip the initialisation: start from the true shape and pose on the first
     /// frame with the person (separates tracking errors from initialisation errors).
     pub oracle_init: bool,
+    /// Give the initialisation the true shape (it fits the pose alone).
+    pub oracle_shape: bool,
     pub track: TrackOptions,
 }
 
@@ -89,6 +91,7 @@ impl Default for BenchOptions {
             fov_deg: 55.0,
             true_silhouettes: false,
             oracle_init: false,
+            oracle_shape: false,
             track: TrackOptions::default(),
         }
     }
@@ -255,6 +258,11 @@ pub fn run_clip(
     let camera = Camera::new(w, h, opts.fov_deg);
     let mut track_opts = opts.track.clone();
     track_opts.fps = opts.fps;
+    if opts.oracle_shape {
+        let mut shape = [0.0; 12];
+        shape.copy_from_slice(&truth.shape.values);
+        track_opts.known_shape = Some(shape);
+    }
     if opts.oracle_init {
         let tf = &truth.frames[0];
         let mut shape = [0.0; 12];

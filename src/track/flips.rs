@@ -241,6 +241,10 @@ pub fn nod_into_trunk(body: &Body, pose: &Pose) -> Option<Pose> {
     Some(fit_landmarks(body, &base, &params, &target, [bent, x0]))
 }
 
+/// The groups a swap refits.
+const LEG_GROUPS: [Group; 2] = [Group::LeftLeg, Group::RightLeg];
+const ARM_GROUPS: [Group; 2] = [Group::LeftArm, Group::RightArm];
+
 /// The groups [`nod_into_trunk`] refits.
 const NOD_GROUPS: [Group; 3] = [Group::Torso, Group::LeftArm, Group::RightArm];
 
@@ -250,6 +254,24 @@ const NOD_GROUPS: [Group; 3] = [Group::Torso, Group::LeftArm, Group::RightArm];
 pub enum Jump {
     Flip(&'static Flip),
     NodIntoTrunk,
+    /// The legs' angles exchanged: seen from the side, or from the back for the
+    /// mirror image, the other leg in front looks alike. Only the colour frame's
+    /// inner outlines tell them apart ([`super::outlines`]).
+    SwapLegs,
+    /// The arms' angles exchanged (likewise).
+    SwapArms,
+}
+
+/// `pose` with the `n` angles from `left` and from `right` exchanged; None when
+/// they differ by under a degree (the swap would move nothing).
+fn swapped(pose: &Pose, left: usize, right: usize, n: usize) -> Option<Pose> {
+    let apart = (0..n).any(|k| (pose[left + k] - pose[right + k]).abs() >= 1.0);
+    apart.then(|| {
+        let mut p = *pose;
+        p[left..left + n].copy_from_slice(&pose[right..right + n]);
+        p[right..right + n].copy_from_slice(&pose[left..left + n]);
+        p
+    })
 }
 
 impl Jump {
@@ -258,7 +280,7 @@ impl Jump {
         FLIPS
             .iter()
             .map(Jump::Flip)
-            .chain(std::iter::once(Jump::NodIntoTrunk))
+            .chain([Jump::NodIntoTrunk, Jump::SwapLegs, Jump::SwapArms])
     }
 
     /// The parameters the jump changes (and the search then refines).
@@ -266,6 +288,8 @@ impl Jump {
         match self {
             Jump::Flip(f) => f.params(),
             Jump::NodIntoTrunk => NOD_GROUPS.iter().flat_map(|g| g.range()).collect(),
+            Jump::SwapLegs => LEG_GROUPS.iter().flat_map(|g| g.range()).collect(),
+            Jump::SwapArms => ARM_GROUPS.iter().flat_map(|g| g.range()).collect(),
         }
     }
 
@@ -274,6 +298,13 @@ impl Jump {
         match self {
             Jump::Flip(f) => f.apply(body, pose),
             Jump::NodIntoTrunk => nod_into_trunk(body, pose),
+            Jump::SwapLegs => swapped(pose, ix::L_HIP, ix::R_HIP, ix::R_HIP - ix::L_HIP),
+            Jump::SwapArms => swapped(
+                pose,
+                ix::L_SHOULDER,
+                ix::R_SHOULDER,
+                ix::R_SHOULDER - ix::L_SHOULDER,
+            ),
         }
     }
 }
@@ -432,6 +463,40 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_swap_exchanges_the_limbs_and_nothing_else() {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TZ] = -300.0;
+        // Symmetric limbs: nothing to swap.
+        assert!(Jump::SwapLegs.apply(&body, &pose).is_none());
+        assert!(Jump::SwapArms.apply(&body, &pose).is_none());
+        pose[ix::L_HIP] = 40.0;
+        pose[ix::R_KNEE] = 70.0;
+        pose[ix::L_SHOULDER + 1] = 60.0;
+        let legs = Jump::SwapLegs.apply(&body, &pose).unwrap();
+        assert_eq!((legs[ix::R_HIP], legs[ix::L_KNEE]), (40.0, 70.0));
+        assert_eq!((legs[ix::L_HIP], legs[ix::R_KNEE]), (0.0, 0.0));
+        let arms = Jump::SwapArms.apply(&body, &pose).unwrap();
+        assert_eq!(
+            (arms[ix::R_SHOULDER + 1], arms[ix::L_SHOULDER + 1]),
+            (60.0, 0.0)
+        );
+        for (k, (a, b)) in legs.iter().zip(&pose).enumerate() {
+            if !Jump::SwapLegs.params().contains(&k) {
+                assert_eq!(a, b);
+            }
+        }
+        // The swapped knee bends the same way, on the other side: the right foot
+        // now hangs where the left one did, mirrored across the body.
+        let (p, q) = (body.posed(&pose), body.posed(&legs));
+        let (lf, rf) = (Joint::LeftFoot.index(), Joint::RightFoot.index());
+        assert!(
+            (p.joints[lf].translation.vector.y - q.joints[rf].translation.vector.y).abs() < 1e-6
+        );
+        assert_eq!(Jump::SwapLegs.apply(&body, &legs), Some(pose));
     }
 
     #[test]

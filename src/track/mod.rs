@@ -5,6 +5,7 @@ pub mod flips;
 pub mod keyframes;
 pub mod metrics;
 pub mod objective;
+pub mod outlines;
 pub mod run;
 pub mod simplex;
 pub mod tracker;

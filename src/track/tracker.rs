@@ -35,6 +35,7 @@ use image::RgbImage;
 use super::flips::Jump;
 use super::keyframes::{KeyframeError, Keyframes};
 use super::objective::{sole_height, Evaluator, Target, Weights};
+use super::outlines::Outlines;
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
@@ -145,6 +146,8 @@ pub struct TrackOptions {
     /// Skip the initialisation: start from this shape and pose on the initial frame
     /// (experiments that separate initialisation from tracking).
     pub initial: Option<(ShapeValues, Pose)>,
+    /// The person's shape when it is known: the initialisation fits only the pose.
+    pub known_shape: Option<ShapeValues>,
     /// When set (by another thread), tracking stops with [`TrackError::Canceled`]
     /// at the next step, also inside the initialisation, which reports no frame for
     /// a while (how a service cancels a job promptly).
@@ -167,6 +170,7 @@ impl Default for TrackOptions {
             keyframes: Keyframes::default(),
             features: FeatureOptions::default(),
             initial: None,
+            known_shape: None,
             stop: None,
         }
     }
@@ -432,6 +436,7 @@ impl Tracker {
             let mut totals: Vec<(f64, Pose)> = Vec::with_capacity(candidates.len());
             for c in &candidates {
                 let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
+                probe.weigh_outlines = false;
                 let mut total = 0.0;
                 for run in [&after, &before] {
                     let mut history = History::new(*c);
@@ -613,9 +618,15 @@ impl Tracker {
             .map(|(_, p)| *p);
 
         // Shape with the root translation, alternating with the pose.
-        let mut shape = STANDARD_SHAPE;
+        let mut shape = self.opts.known_shape.unwrap_or(STANDARD_SHAPE);
+        if self.opts.known_shape.is_some() {
+            let body = Body::new(&shape);
+            pose = Search::new(self, &body, f64::NEG_INFINITY)
+                .fit_wide(target, pose, 3)
+                .0;
+        }
         for _ in 0..3 {
-            if self.stopping() {
+            if self.stopping() || self.opts.known_shape.is_some() {
                 break;
             }
             let mut x0: Vec<f64> = shape.to_vec();
@@ -760,6 +771,11 @@ struct Search<'a> {
     body: &'a Body,
     ground: f64,
     evals: u64,
+    /// Buffers of [`Search::outline_cost`], made when first needed.
+    outlines: std::cell::RefCell<Option<Outlines>>,
+    /// Weigh the inner outlines in ([`Search::outline_cost`]); off for the probes
+    /// that compare the initial candidates, which F and the facing rule decide.
+    weigh_outlines: bool,
 }
 
 impl<'a> Search<'a> {
@@ -770,7 +786,27 @@ impl<'a> Search<'a> {
             body,
             ground,
             evals: 0,
+            outlines: std::cell::RefCell::new(None),
+            weigh_outlines: true,
         }
+    }
+
+    /// What `pose`'s inner outlines cost on `target` ([`Weights::outline`] per pixel
+    /// of disagreement with the colour frame's edges); None without a colour frame
+    /// or with the weight 0.
+    fn outline_cost(&self, target: &Target, pose: &Pose) -> Option<f64> {
+        let w = self.tracker.opts.weights.outline;
+        if w <= 0.0 || !self.weigh_outlines {
+            return None;
+        }
+        target.edges.as_ref()?;
+        let cam = &self.tracker.camera;
+        let d = self
+            .outlines
+            .borrow_mut()
+            .get_or_insert_with(|| Outlines::new(cam))
+            .disagreement(self.body, cam, target, pose)?;
+        Some(w * d)
     }
 
     fn evaluator<'b>(&'b self, target: &'b Target) -> Evaluator<'b> {
@@ -881,7 +917,7 @@ impl<'a> Search<'a> {
         self.polish(&mut ev, &mut best, &mut best_f, &lo, &hi, index as u64);
         // A keyframe's frames keep their start (and the keyframe its parameters).
         if !keyframe {
-            self.try_jumps(&mut ev, &mut best, &mut best_f);
+            self.try_jumps(&mut ev, target, &mut best, &mut best_f);
         }
         let mut iou = ev.iou(&best);
         if !keyframe && iou < opts.recover_iou && history.quiet >= RECOVER_GAP {
@@ -1005,13 +1041,26 @@ impl<'a> Search<'a> {
         opts.reach * MOTION[k].scale * scale
     }
 
-    /// Tries every jump from `best` ([`Jump`]: the depth flips and the nod moved into
-    /// the trunk): each is refined by one pass of the search over its parameters
-    /// within the acceleration reach around it (half the budget of the frame's own
-    /// search: it starts near its answer), and kept when it explains the frame better.
-    fn try_jumps(&self, ev: &mut Evaluator, best: &mut Pose, best_f: &mut f64) {
+    /// Tries every jump from `best` ([`Jump`]: the depth flips, the nod moved into
+    /// the trunk, the left/right swaps): each is refined by one pass of the search
+    /// over its parameters within the acceleration reach around it (half the budget
+    /// of the frame's own search: it starts near its answer), and kept when it
+    /// explains the frame better: F plus, on a colour frame, the inner outlines'
+    /// cost ([`Search::outline_cost`]), which tells apart what the silhouette cannot.
+    fn try_jumps(&self, ev: &mut Evaluator, target: &Target, best: &mut Pose, best_f: &mut f64) {
         let opts = &self.tracker.opts;
+        // The result's outline cost, computed when first needed.
+        let mut best_o: Option<Option<f64>> = None;
         for jump in Jump::all() {
+            // A swap looks alike in the silhouette: only the outlines can tell.
+            let swap = matches!(jump, Jump::SwapLegs | Jump::SwapArms);
+            if swap
+                && best_o
+                    .get_or_insert_with(|| self.outline_cost(target, best))
+                    .is_none()
+            {
+                continue;
+            }
             let params = jump.params();
             let Some(mut pose) = jump.apply(self.body, best) else {
                 continue;
@@ -1025,7 +1074,25 @@ impl<'a> Search<'a> {
                 hi[k] = (pose[k] + reach).min(MOTION[k].hi);
             }
             self.hierarchical(ev, &mut pose, &mut f, &lo, &hi, 1, opts.evals_per_param / 2);
-            if f < *best_f {
+            if !f.is_finite() {
+                continue;
+            }
+            let o_best = *best_o.get_or_insert_with(|| self.outline_cost(target, best));
+            let better = match o_best {
+                // Outline costs are ≥ 0: a jump dearer by more than the result's
+                // own cannot win.
+                Some(o) if f - *best_f < o => {
+                    let o_jump = self.outline_cost(target, &pose).unwrap_or(0.0);
+                    let wins = f + o_jump < *best_f + o;
+                    if wins {
+                        best_o = Some(Some(o_jump));
+                    }
+                    wins
+                }
+                Some(_) => false,
+                None => f < *best_f,
+            };
+            if better {
                 *best_f = f;
                 *best = pose;
             }

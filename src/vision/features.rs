@@ -125,6 +125,8 @@ pub struct FrameFeatures {
     /// within `edge_band` pixels of the silhouette; without a colour frame, the
     /// silhouette's own outline (pixels of S with a 4-neighbour outside S).
     pub edges: Mask,
+    /// Whether `edges` came from a colour frame (false: the outline itself).
+    pub colour_edges: bool,
     /// Outer contour of the person's main (largest) blob, in border-following order
     /// (8-connected pixel chain). Empty for an empty silhouette.
     pub contour: Vec<[i32; 2]>,
@@ -190,6 +192,7 @@ pub fn compute(
         .collect();
 
     let edges = edge_map(silhouette, frame, &inside, &outside, opts);
+    let colour_edges = frame.is_some_and(|fr| fr.width() == w && fr.height() == h);
 
     let mut f = FrameFeatures {
         width: w,
@@ -197,6 +200,7 @@ pub fn compute(
         coremap,
         inside,
         edges,
+        colour_edges,
         contour: Vec::new(),
         extremities: Vec::new(),
         head: None,
