@@ -14,31 +14,20 @@
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}`; when absent the
 //! example says so and exits successfully.
 
+mod common;
+use common::list;
+
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use image::imageops::{resize, FilterType};
 use monocap::body::{Camera, Mask};
 use monocap::track::objective::OUTLINE_WEIGHT;
 use monocap::track::tracker::{FrameInput, TrackOptions, Tracker};
 
 const SEQUENCES: [&str; 3] = ["lucia", "dance-twirl", "tennis"];
-
-fn list(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| e.eq_ignore_ascii_case(ext))
-        })
-        .collect();
-    files.sort();
-    Ok(files)
-}
 
 /// The sequence's masks and frames at half size.
 fn load(dir: &Path) -> Result<Vec<FrameInput>> {

@@ -19,6 +19,9 @@
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
 
+mod common;
+use common::list;
+
 use std::fs::File;
 use std::io::{BufWriter, Write};
 use std::ops::ControlFlow;
@@ -139,21 +142,6 @@ fn main() -> Result<()> {
     write_picture(&results, &picture)?;
     println!("picture: {}", picture.display());
     Ok(())
-}
-
-/// Sorted `*.<ext>` files of `dir`.
-fn list(dir: &Path, ext: &str) -> Result<Vec<PathBuf>> {
-    let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .with_context(|| format!("cannot list {}", dir.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            p.extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| e.eq_ignore_ascii_case(ext))
-        })
-        .collect();
-    files.sort();
-    Ok(files)
 }
 
 /// Packs the mask PNGs into `zip_path` as 000000.png, 000001.png, … (stored: the
