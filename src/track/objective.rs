@@ -55,10 +55,10 @@ pub struct Weights {
     /// Per pixel of disagreement between a pose's inner outlines and the colour
     /// frame's edges ([`super::outlines`]), weighed in when the tracker chooses
     /// between a frame's result and a jump with nearly the same silhouette (a depth
-    /// flip, the nod, the left/right swaps); 0 for never. On the accuracy benchmark (8 against none) PCK@0.1
-    /// 0.837 → 0.861 with a person-free lead-in and 0.810 → 0.848 without,
-    /// PA-MPJPE 138.0 → 129.7 and 133.9 → 125.7 mm (README, "The colour frame's
-    /// inner outlines").
+    /// flip, the nod, the left/right swaps); 0 for never. On the accuracy
+    /// benchmark (8 against none) PCK@0.1 0.837 → 0.861 with a person-free lead-in
+    /// and 0.810 → 0.848 without, PA-MPJPE 138.0 → 129.7 and 133.9 → 125.7 mm
+    /// (README, "The colour frame's inner outlines").
     pub outline: f64,
 }
 
