@@ -617,16 +617,20 @@ impl Tracker {
             .min_by(|a, b| a.0.total_cmp(&b.0))
             .map(|(_, p)| *p);
 
-        // Shape with the root translation, alternating with the pose.
+        // A known shape: the pose alone is fitted again, with its body; otherwise
+        // the shape with the root translation, alternating with the pose.
         let mut shape = self.opts.known_shape.unwrap_or(STANDARD_SHAPE);
-        if self.opts.known_shape.is_some() {
+        let rounds = if self.opts.known_shape.is_some() {
             let body = Body::new(&shape);
             pose = Search::new(self, &body, f64::NEG_INFINITY)
                 .fit_wide(target, pose, 3)
                 .0;
-        }
-        for _ in 0..3 {
-            if self.stopping() || self.opts.known_shape.is_some() {
+            0
+        } else {
+            3
+        };
+        for _ in 0..rounds {
+            if self.stopping() {
                 break;
             }
             let mut x0: Vec<f64> = shape.to_vec();
@@ -791,22 +795,27 @@ impl<'a> Search<'a> {
         }
     }
 
+    /// Whether this search weighs the inner outlines in on `target`: a colour
+    /// frame, a weight above 0, and not a probe of the initial candidates.
+    fn weighs_outlines(&self, target: &Target) -> bool {
+        self.weigh_outlines && self.tracker.opts.weights.outline > 0.0 && target.edges.is_some()
+    }
+
     /// What `pose`'s inner outlines cost on `target` ([`Weights::outline`] per pixel
-    /// of disagreement with the colour frame's edges); None without a colour frame
-    /// or with the weight 0.
-    fn outline_cost(&self, target: &Target, pose: &Pose) -> Option<f64> {
-        let w = self.tracker.opts.weights.outline;
-        if w <= 0.0 || !self.weigh_outlines {
-            return None;
+    /// of disagreement with the colour frame's edges); 0 where
+    /// [`Search::weighs_outlines`] says no.
+    fn outline_cost(&self, target: &Target, pose: &Pose) -> f64 {
+        if !self.weighs_outlines(target) {
+            return 0.0;
         }
-        target.edges.as_ref()?;
         let cam = &self.tracker.camera;
         let d = self
             .outlines
             .borrow_mut()
             .get_or_insert_with(|| Outlines::new(cam))
-            .disagreement(self.body, cam, target, pose)?;
-        Some(w * d)
+            .disagreement(self.body, cam, target, pose)
+            .unwrap_or(0.0);
+        self.tracker.opts.weights.outline * d
     }
 
     fn evaluator<'b>(&'b self, target: &'b Target) -> Evaluator<'b> {
@@ -1049,16 +1058,12 @@ impl<'a> Search<'a> {
     /// cost ([`Search::outline_cost`]), which tells apart what the silhouette cannot.
     fn try_jumps(&self, ev: &mut Evaluator, target: &Target, best: &mut Pose, best_f: &mut f64) {
         let opts = &self.tracker.opts;
+        let weigh = self.weighs_outlines(target);
         // The result's outline cost, computed when first needed.
-        let mut best_o: Option<Option<f64>> = None;
+        let mut best_o: Option<f64> = None;
         for jump in Jump::all() {
             // A swap looks alike in the silhouette: only the outlines can tell.
-            let swap = matches!(jump, Jump::SwapLegs | Jump::SwapArms);
-            if swap
-                && best_o
-                    .get_or_insert_with(|| self.outline_cost(target, best))
-                    .is_none()
-            {
+            if matches!(jump, Jump::SwapLegs | Jump::SwapArms) && !weigh {
                 continue;
             }
             let params = jump.params();
@@ -1077,20 +1082,20 @@ impl<'a> Search<'a> {
             if !f.is_finite() {
                 continue;
             }
-            let o_best = *best_o.get_or_insert_with(|| self.outline_cost(target, best));
-            let better = match o_best {
+            let better = if weigh {
+                let o = *best_o.get_or_insert_with(|| self.outline_cost(target, best));
                 // Outline costs are ≥ 0: a jump dearer by more than the result's
                 // own cannot win.
-                Some(o) if f - *best_f < o => {
-                    let o_jump = self.outline_cost(target, &pose).unwrap_or(0.0);
+                f - *best_f < o && {
+                    let o_jump = self.outline_cost(target, &pose);
                     let wins = f + o_jump < *best_f + o;
                     if wins {
-                        best_o = Some(Some(o_jump));
+                        best_o = Some(o_jump);
                     }
                     wins
                 }
-                Some(_) => false,
-                None => f < *best_f,
+            } else {
+                f < *best_f
             };
             if better {
                 *best_f = f;

@@ -191,8 +191,10 @@ pub fn compute(
         .map(|(di, do_)| 1.0 + cw * di + do_)
         .collect();
 
+    // A colour frame of another size than the silhouette is not used.
+    let frame = frame.filter(|fr| fr.width() == w && fr.height() == h);
     let edges = edge_map(silhouette, frame, &inside, &outside, opts);
-    let colour_edges = frame.is_some_and(|fr| fr.width() == w && fr.height() == h);
+    let colour_edges = frame.is_some();
 
     let mut f = FrameFeatures {
         width: w,
@@ -373,6 +375,8 @@ fn lower_envelope(f: &[f64], out: &mut [f64], v: &mut [usize], z: &mut [f64]) {
     }
 }
 
+/// The edge map T (see [`FrameFeatures::edges`]); `frame`, when given, is the
+/// silhouette's size.
 fn edge_map(
     s: &Mask,
     frame: Option<&RgbImage>,
@@ -382,7 +386,7 @@ fn edge_map(
 ) -> Mask {
     let (w, h) = (s.width(), s.height());
     let mut edges = Mask::new(w, h);
-    match frame.filter(|fr| fr.width() == w && fr.height() == h) {
+    match frame {
         Some(fr) => {
             let gray = image::imageops::grayscale(fr);
             let grad = imageproc::gradients::sobel_gradients(&gray);
