@@ -582,7 +582,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         None => None,
     };
     println!(
-        "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>6} {:>7} {:>6}",
+        "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>6} {:>7} {:>6} {:>6}",
         "clip",
         "frames",
         "PCK0.1",
@@ -594,12 +594,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         "lost",
         "missed",
         "fps",
-        "search"
+        "search",
+        "shape"
     );
     let mut all = Accumulator::default();
     let mut fps = Vec::new();
     let mut lost = 0;
     let mut missed = 0;
+    let mut shape_error = 0.0;
     let mut write_error = None;
     let reports = bench::run(&opts, |r| {
         if let Some(f) = per_frame.as_mut() {
@@ -610,7 +612,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
             }
         }
         println!(
-            "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>6} {:>7.1} {:>5.0}%",
+            "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>6} {:>7.1} {:>5.0}% {:>6.3}",
             r.name,
             r.acc.frames(),
             r.acc.pck(),
@@ -622,7 +624,8 @@ fn bench_command(a: BenchArgs) -> Result<()> {
             r.lost,
             r.missed,
             r.track_fps,
-            100.0 * r.search_share
+            100.0 * r.search_share,
+            r.shape_error
         );
     })?;
     for r in &reports {
@@ -630,10 +633,11 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         fps.push(r.track_fps);
         lost += r.lost;
         missed += r.missed;
+        shape_error += r.shape_error;
     }
     fps.sort_by(f64::total_cmp);
     println!(
-        "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6} {:>5} {:>6} {:>7.1}",
+        "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6} {:>5} {:>6} {:>7.1} {:>6} {:>6.3}",
         format!("overall ({} clips; fps: median)", reports.len()),
         all.frames(),
         all.pck(),
@@ -644,7 +648,24 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         "",
         lost,
         missed,
-        fps[fps.len() / 2]
+        fps[fps.len() / 2],
+        "",
+        shape_error / reports.len().max(1) as f64
+    );
+    let mut joints = [0.0; bench::JOINTS.len()];
+    for r in &reports {
+        for (j, e) in joints.iter_mut().zip(&r.joint_error_mm) {
+            *j += e;
+        }
+    }
+    println!(
+        "PA-MPJPE by joint (mm): {}",
+        bench::JOINTS
+            .iter()
+            .zip(joints)
+            .map(|(j, e)| format!("{} {:.0}", j.name(), e / all.frames().max(1) as f64))
+            .collect::<Vec<_>>()
+            .join(", ")
     );
     println!(
         "missed: {:.1}% of frames, where the true shape and pose cost over {:.0}% less than \

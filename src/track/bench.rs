@@ -115,6 +115,12 @@ pub struct ClipReport {
     /// the search did not find. On the others the tracker is about as good as the
     /// truth by the objective's measure, or the objective itself prefers its pose.
     pub missed: usize,
+    /// How far the fitted shape's proportions are from the performer's
+    /// ([`metrics::shape_error`]).
+    pub shape_error: f64,
+    /// Each of [`JOINTS`]' distance from the truth after the frame's similarity
+    /// alignment (as in PA-MPJPE), summed over the frames (mm).
+    pub joint_error_mm: [f64; JOINTS.len()],
     /// Each frame with a person, in order.
     pub frames: Vec<FrameReport>,
 }
@@ -306,6 +312,8 @@ pub fn run_clip(
         search_share: track.timing.search / (track.timing.search + track.timing.features).max(1e-9),
         evals_per_frame: track.timing.evals as f64 / n as f64,
         missed: 0,
+        shape_error: metrics::shape_error(&track.shape, &truth.shape.values),
+        joint_error_mm: [0.0; JOINTS.len()],
         frames: Vec::new(),
     };
     let truth_costs = truth_costs(&kept_silhouettes, &kept_frames, &truth, &camera, opts);
@@ -329,7 +337,12 @@ pub fn run_clip(
         let height = mask_height(&masks[tf.index]).max(1.0);
         let plain = metrics::pck_frame(&pred2, &true2, height, 0.1);
         let swapped = metrics::pck_frame_swapped(&pred2, &true2, height, 0.1, &PAIRS);
-        let pa = metrics::pa_mpjpe(&pred3, &true3) * 10.0;
+        // PA-MPJPE, and each joint's share of it.
+        let aligned = metrics::align_similarity(&pred3, &true3);
+        let pa = metrics::mpjpe(&aligned, &true3) * 10.0;
+        for ((e, a), t) in report.joint_error_mm.iter_mut().zip(&aligned).zip(&true3) {
+            *e += 10.0 * metrics::mpjpe(&[*a], &[*t]);
+        }
         let mut model = Mask::new(w, h);
         crate::body::raster::render_mask(&body, &posed, &camera, &mut model);
         let iou = model.iou(&masks[tf.index]);

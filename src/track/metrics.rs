@@ -289,6 +289,25 @@ pub fn mpjpe(pred: &[[f64; 3]], truth: &[[f64; 3]]) -> f64 {
     ratio(total, pred.len())
 }
 
+/// How far a fitted shape's proportions are from the true ones: the root mean
+/// square of the log ratios of the scale factors after their mean is removed (one
+/// camera cannot see the overall size, so a body uniformly 10% larger scores 0).
+/// 0.1 is about 10% off per value. Returns `0.0` for empty input.
+///
+/// # Panics
+///
+/// Panics if `fitted.len() != truth.len()`.
+pub fn shape_error(fitted: &[f64], truth: &[f64]) -> f64 {
+    assert_same_len(fitted.len(), truth.len());
+    let logs: Vec<f64> = fitted
+        .iter()
+        .zip(truth)
+        .map(|(f, t)| (f / t).ln())
+        .collect();
+    let mean = ratio(logs.iter().sum(), logs.len());
+    ratio(logs.iter().map(|l| (l - mean).powi(2)).sum(), logs.len()).sqrt()
+}
+
 /// Running totals over many frames and clips.
 ///
 /// Every accessor returns `0.0` when nothing has been added, so an empty
@@ -367,6 +386,20 @@ impl Accumulator {
 mod tests {
     use super::*;
     use nalgebra::{Rotation3, Unit};
+
+    #[test]
+    fn shape_error_ignores_the_overall_size() {
+        let truth = [1.0, 0.8, 1.2, 0.9];
+        let larger: Vec<f64> = truth.iter().map(|t| t * 1.1).collect();
+        assert!(shape_error(&larger, &truth) < 1e-12);
+        let mut off = truth;
+        off[1] *= 1.5;
+        let e = shape_error(&off, &truth);
+        // One of four values 1.5× too large: log 1.5 with its mean removed.
+        let l = 1.5f64.ln();
+        let expected = ((0.75 * l).powi(2) + 3.0 * (0.25 * l).powi(2)) / 4.0;
+        assert!((e - expected.sqrt()).abs() < 1e-12, "{e}");
+    }
 
     /// A deliberately asymmetric, non-planar 3D point set (14 joints).
     fn skeleton3() -> Vec<[f64; 3]> {
