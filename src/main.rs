@@ -363,7 +363,23 @@ fn main() -> ExitCode {
     }
 }
 
+/// The one-shot commands end quietly, as other command-line tools do, when the
+/// program reading their output stops (`monocap bench | head`): Rust ignores
+/// SIGPIPE, and every later print to the closed pipe would panic. The service
+/// keeps ignoring it: a client hanging up must not stop the server.
+fn end_on_closed_pipe() {
+    #[cfg(unix)]
+    // SAFETY: called at start-up, before any other thread exists; restores the
+    // signal's default disposition and touches no memory.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
+}
+
 fn run(cli: Cli) -> Result<()> {
+    if !matches!(cli.command, Command::Serve(_) | Command::Keys { .. }) {
+        end_on_closed_pipe();
+    }
     match cli.command {
         Command::Probe(a) => probe_command(a),
         Command::Silhouettes(a) => silhouettes_command(a),

@@ -295,6 +295,35 @@ fn probe_and_silhouettes_on_a_synthetic_clip() {
     );
 }
 
+/// A reader that stops early (`monocap probe clip | head -c 0`) ends the command
+/// quietly, as it would any other command-line tool: no panic, no backtrace.
+#[cfg(unix)]
+#[test]
+fn a_closed_output_pipe_ends_a_command_without_a_panic() {
+    use std::os::unix::process::ExitStatusExt;
+    use std::process::{Command, Stdio};
+    let dir = TempDir::new("closed-pipe");
+    let clip = dir.path("clip.y4m");
+    assert_success("synth", &synth(&clip, &["--style", "color"]));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_monocap"))
+        .args(["probe", s(&clip)])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("the monocap binary runs");
+    // Close the reading end before the command prints.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().expect("the command ends");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "panicked: {stderr}");
+    assert_eq!(
+        out.status.signal(),
+        Some(libc::SIGPIPE),
+        "{:?}, stderr {stderr:?}",
+        out.status
+    );
+}
+
 #[test]
 fn a_person_who_never_moves_without_person_free_frames_gets_a_warning() {
     // One frame of a person, repeated: no frame shows the scene behind them, so a
