@@ -305,15 +305,15 @@ fn a_closed_output_pipe_ends_a_command_without_a_panic() {
     let dir = TempDir::new("closed-pipe");
     let clip = dir.path("clip.y4m");
     assert_success("synth", &synth(&clip, &["--style", "color"]));
-    let mut child = Command::new(env!("CARGO_BIN_EXE_monocap"))
+    // The pipe's reading end is closed before the command starts.
+    let (reader, writer) = std::io::pipe().expect("a pipe");
+    drop(reader);
+    let out = Command::new(env!("CARGO_BIN_EXE_monocap"))
         .args(["probe", s(&clip)])
-        .stdout(Stdio::piped())
+        .stdout(writer)
         .stderr(Stdio::piped())
-        .spawn()
+        .output()
         .expect("the monocap binary runs");
-    // Close the reading end before the command prints.
-    drop(child.stdout.take());
-    let out = child.wait_with_output().expect("the command ends");
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(!stderr.contains("panicked"), "panicked: {stderr}");
     assert_eq!(
