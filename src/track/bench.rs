@@ -23,7 +23,7 @@ use image::RgbImage;
 use super::metrics::{self, Accumulator};
 use super::objective::{Evaluator, Target};
 use super::tracker::{FrameInput, TrackOptions, Tracker};
-use crate::body::params::{ix, MOTION_COUNT, SHAPE_COUNT};
+use crate::body::params::{ix, ShapeValues, MOTION_COUNT, SHAPE_COUNT};
 use crate::body::skeleton::Joint;
 use crate::body::{Body, Camera, Mask};
 use crate::clip::write::Frame;
@@ -265,18 +265,14 @@ pub fn run_clip(
     let mut track_opts = opts.track.clone();
     track_opts.fps = opts.fps;
     if opts.oracle_shape {
-        let mut shape = [0.0; 12];
-        shape.copy_from_slice(&truth.shape.values);
-        track_opts.known_shape = Some(shape);
+        track_opts.known_shape = Some(true_shape(&truth));
     }
     if opts.oracle_init {
         let tf = &truth.frames[0];
-        let mut shape = [0.0; 12];
-        shape.copy_from_slice(&truth.shape.values);
-        let mut pose = [0.0; 30];
+        let mut pose = [0.0; MOTION_COUNT];
         pose.copy_from_slice(&tf.params);
         track_opts.init_frame = Some(tf.index);
-        track_opts.initial = Some((shape, pose));
+        track_opts.initial = Some((true_shape(&truth), pose));
     }
     let tracker = Tracker::new(camera.clone(), track_opts);
     let n = frames.len();
@@ -372,6 +368,13 @@ pub fn run_clip(
     Ok(report)
 }
 
+/// The performer's shape values.
+fn true_shape(truth: &Truth) -> ShapeValues {
+    let mut shape = [0.0; SHAPE_COUNT];
+    shape.copy_from_slice(&truth.shape.values);
+    shape
+}
+
 fn mask_height(m: &Mask) -> f64 {
     super::tracker::mask_bbox(m).map_or(0.0, |b| (b[3] - b[1] + 1) as f64)
 }
@@ -386,9 +389,7 @@ fn truth_costs(
     camera: &Camera,
     opts: &BenchOptions,
 ) -> Vec<f64> {
-    let mut shape = [0.0; SHAPE_COUNT];
-    shape.copy_from_slice(&truth.shape.values);
-    let body = Body::new(&shape);
+    let body = Body::new(&true_shape(truth));
     let mut out = vec![f64::INFINITY; silhouettes.len()];
     let mut prev = None;
     let mut at = truth.frames.iter().peekable();
