@@ -9,12 +9,13 @@
 //! frame with the input mask and the model's silhouette tinted over it.
 //!
 //! ```text
-//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N]
+//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
 //! paper's objective, `Weights::track_rewards`), `--reward-rim N` then withholds them
-//! near the outline (`Weights::reward_rim`).
+//! near the outline (`Weights::reward_rim`); `--polish-evals N` sets the joint
+//! polish's budget (`TrackOptions::polish_evals`, 0 for none).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -34,6 +35,7 @@ use image::{GrayImage, Rgb, RgbImage};
 use monocap::body::raster::render_mask;
 use monocap::body::{Body, Mask};
 use monocap::track::run::{track_clip, ClipTrack, ClipTrackOptions};
+use monocap::track::tracker::TrackOptions;
 
 const SEQUENCES: [&str; 3] = ["lucia", "dance-twirl", "tennis"];
 /// The project's stated target for the mean IoU of a sequence.
@@ -87,6 +89,7 @@ fn main() -> Result<()> {
     let mut picture = root.join("docs/davis_tracking.png");
     let mut reward_rim = 0.0;
     let mut track_rewards = false;
+    let mut polish_evals = TrackOptions::default().polish_evals;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
         if a == "--track-rewards" {
@@ -96,6 +99,11 @@ fn main() -> Result<()> {
             match v {
                 Some(v) if v.is_finite() && v >= 0.0 => reward_rim = v,
                 _ => bail!("--reward-rim: expected a number ≥ 0"),
+            }
+        } else if a == "--polish-evals" {
+            match args.next().and_then(|v| v.to_str()?.parse::<usize>().ok()) {
+                Some(v) => polish_evals = v,
+                None => bail!("--polish-evals: expected a whole number ≥ 0"),
             }
         } else {
             picture = PathBuf::from(a);
@@ -118,7 +126,7 @@ fn main() -> Result<()> {
             println!("{seq}: {} not found, skipped", dir.display());
             continue;
         }
-        match run_sequence(seq, &dir, &tmp, track_rewards, reward_rim) {
+        match run_sequence(seq, &dir, &tmp, track_rewards, reward_rim, polish_evals) {
             Ok(r) => results.push(r),
             Err(e) => {
                 outcome = Err(e.context(format!("sequence {seq}")));
@@ -185,6 +193,7 @@ fn run_sequence(
     tmp: &Path,
     track_rewards: bool,
     reward_rim: f64,
+    polish_evals: usize,
 ) -> Result<SeqResult> {
     let masks = list(&dir.join("masks"), "png")?;
     let frames = list(&dir.join("frames"), "jpg")?;
@@ -206,6 +215,7 @@ fn run_sequence(
         ..ClipTrackOptions::default()
     };
     opts.track.weights.reward_rim = reward_rim;
+    opts.track.polish_evals = polish_evals;
     opts.track.weights.track_rewards = track_rewards;
     let t0 = Instant::now();
     let mut done = 0usize;

@@ -5,6 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
+use crate::track::tracker::MAX_POLISH_EVALS;
 use crate::vision::background::EmptyFrames;
 
 /// Every field is optional; an unknown field is an error, not silently ignored.
@@ -17,6 +18,10 @@ pub struct JobOptions {
     /// Runs of the hierarchical simplex per frame, 1 to 20 (default 3).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub restarts: Option<usize>,
+    /// Evaluations of the joint polish on a poorly fitted frame, 0 to 100,000
+    /// (default 0: none; see `TrackOptions::polish_evals`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub polish_evals: Option<usize>,
     /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub keyframes: Option<serde_json::Value>,
@@ -116,6 +121,14 @@ impl JobOptions {
                 return Err(format!("restarts {r}: expected 1 to 20"));
             }
             o.track.restarts = r;
+        }
+        if let Some(n) = self.polish_evals {
+            if n > MAX_POLISH_EVALS {
+                return Err(format!(
+                    "polish_evals {n}: expected 0 to {MAX_POLISH_EVALS}"
+                ));
+            }
+            o.track.polish_evals = n;
         }
         let w = &mut o.track.weights;
         for (name, v, slot) in [
