@@ -584,8 +584,8 @@ fn track_clip(cam: &Camera, masks: &[Mask], initial: Pose, restarts: usize) -> R
         fps: FPS,
         init_frame: Some(0),
         initial: Some((STANDARD_SHAPE, initial)),
-        // The paper's restarts alone: the joint polish, on by default where a frame
-        // fits poorly, would blur the comparison.
+        // The paper's restarts alone: the joint polish (off by default) would blur
+        // the comparison.
         polish_evals: 0,
         ..TrackOptions::default()
     };

@@ -434,8 +434,8 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"restarts": 21}), false);
     check(serde_json::json!({"restarts": 0}), false);
     check(serde_json::json!({"polish_evals": 0}), true);
-    check(serde_json::json!({"polish_evals": 100000}), true);
-    check(serde_json::json!({"polish_evals": 100001}), false);
+    check(serde_json::json!({"polish_evals": 10000}), true);
+    check(serde_json::json!({"polish_evals": 10001}), false);
     check(serde_json::json!({"polish_evals": -1}), false);
     check(serde_json::json!({"work_height": 32}), true);
     check(serde_json::json!({"work_height": 1080}), true);

@@ -18,7 +18,7 @@ pub struct JobOptions {
     /// Runs of the hierarchical simplex per frame, 1 to 20 (default 3).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub restarts: Option<usize>,
-    /// Evaluations of the joint polish on a poorly fitted frame, 0 to 100,000
+    /// Evaluations of the joint polish on a poorly fitted frame, 0 to 10,000
     /// (default 0: none; see `TrackOptions::polish_evals`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polish_evals: Option<usize>,

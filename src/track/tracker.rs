@@ -74,8 +74,9 @@ const POLISH_SPREAD: f64 = 0.3;
 
 /// The defaults of [`TrackOptions::polish_evals`] and [`TrackOptions::polish_iou`].
 const POLISH_EVALS: usize = 0;
-/// The most joint-polish evaluations a frame may ask for (some seconds a frame).
-pub const MAX_POLISH_EVALS: usize = 100_000;
+/// The most joint-polish evaluations a frame may ask for (seconds a frame: a job
+/// cannot hold a worker for days).
+pub const MAX_POLISH_EVALS: usize = 10_000;
 const POLISH_IOU: f64 = 0.85;
 
 /// Latest user-chosen initial frame (frames before it are buffered).
