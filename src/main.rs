@@ -562,10 +562,18 @@ fn parse_list<T: std::str::FromStr>(flag: &str, text: &str) -> Result<Vec<T>> {
         .collect()
 }
 
+/// `--polish-evals` within [`monocap::track::tracker::MAX_POLISH_EVALS`].
+fn check_polish_evals(n: usize) -> Result<()> {
+    use monocap::track::tracker::MAX_POLISH_EVALS;
+    if n > MAX_POLISH_EVALS {
+        anyhow::bail!("--polish-evals {n}: expected 0 to {MAX_POLISH_EVALS}");
+    }
+    Ok(())
+}
+
 fn bench_command(a: BenchArgs) -> Result<()> {
     use monocap::track::bench::{self, BenchOptions};
     use monocap::track::metrics::Accumulator;
-    use monocap::track::tracker::MAX_POLISH_EVALS;
     let mut opts = BenchOptions {
         mocap_dir: a.mocap,
         filter: a.only,
@@ -578,12 +586,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
-    if a.polish_evals > MAX_POLISH_EVALS {
-        anyhow::bail!(
-            "--polish-evals {}: expected at most {MAX_POLISH_EVALS}",
-            a.polish_evals
-        );
-    }
+    check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
     if a.polish_iou.is_nan() || a.polish_iou < 0.0 {
         anyhow::bail!(
@@ -732,13 +735,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     if a.restarts == 0 || a.restarts > 20 {
         anyhow::bail!("--restarts {}: expected 1 to 20", a.restarts);
     }
-    if a.polish_evals > monocap::track::tracker::MAX_POLISH_EVALS {
-        anyhow::bail!(
-            "--polish-evals {}: expected 0 to {}",
-            a.polish_evals,
-            monocap::track::tracker::MAX_POLISH_EVALS
-        );
-    }
+    check_polish_evals(a.polish_evals)?;
     if !(a.w_core.is_finite() && a.w_core >= 0.0) {
         anyhow::bail!("--w-core {}: expected a number ≥ 0", a.w_core);
     }

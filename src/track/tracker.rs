@@ -72,12 +72,13 @@ const RECOVER_GAP: usize = 5;
 /// The joint polish's initial spread, in length scales of each parameter.
 const POLISH_SPREAD: f64 = 0.3;
 
-/// The defaults of [`TrackOptions::polish_evals`] and [`TrackOptions::polish_iou`].
+/// The default of [`TrackOptions::polish_evals`].
 const POLISH_EVALS: usize = 0;
+/// The default of [`TrackOptions::polish_iou`].
+const POLISH_IOU: f64 = 0.85;
 /// The most joint-polish evaluations a frame may ask for (seconds a frame: a job
 /// cannot hold a worker for days).
 pub const MAX_POLISH_EVALS: usize = 10_000;
-const POLISH_IOU: f64 = 0.85;
 
 /// Latest user-chosen initial frame (frames before it are buffered).
 pub const MAX_INIT_FRAME: usize = 1800;
@@ -924,17 +925,7 @@ impl<'a> Search<'a> {
             }
         }
         // The reach of the search: acceleration limits around the prediction.
-        let mut lo = [0.0; MOTION_COUNT];
-        let mut hi = [0.0; MOTION_COUNT];
-        for k in 0..MOTION_COUNT {
-            let reach = self.reach(k);
-            lo[k] = (start[k] - reach).max(MOTION[k].lo);
-            hi[k] = (start[k] + reach).min(MOTION[k].hi);
-            if fixed[k] {
-                lo[k] = start[k];
-                hi[k] = start[k];
-            }
-        }
+        let (lo, hi) = self.reach_box(&start, &fixed);
         let mut best = start;
         self.hierarchical(
             &mut ev,
@@ -953,11 +944,7 @@ impl<'a> Search<'a> {
         // The joint polish where the fit is poor, within the reach around the result
         // (a jump may have left the box around the start).
         if opts.polish_evals > 0 && iou < opts.polish_iou {
-            for k in (0..MOTION_COUNT).filter(|&k| !fixed[k]) {
-                let reach = self.reach(k);
-                lo[k] = (best[k] - reach).max(MOTION[k].lo);
-                hi[k] = (best[k] + reach).min(MOTION[k].hi);
-            }
+            let (lo, hi) = self.reach_box(&best, &fixed);
             let (mut polished, mut polished_f) = (best, best_f);
             if self.polish(
                 &mut ev,
@@ -1086,6 +1073,19 @@ impl<'a> Search<'a> {
             }
         }
         (found, spent)
+    }
+
+    /// The search box around `around`: each parameter within its reach and its
+    /// limits; a `fixed` one (a keyframe's) held where it is.
+    fn reach_box(&self, around: &Pose, fixed: &[bool; MOTION_COUNT]) -> (Pose, Pose) {
+        let mut lo = *around;
+        let mut hi = *around;
+        for k in (0..MOTION_COUNT).filter(|&k| !fixed[k]) {
+            let reach = self.reach(k);
+            lo[k] = (around[k] - reach).max(MOTION[k].lo);
+            hi[k] = (around[k] + reach).min(MOTION[k].hi);
+        }
+        (lo, hi)
     }
 
     /// How far parameter `k` may move in one frame: the acceleration limit
