@@ -192,6 +192,11 @@ struct TrackArgs {
     /// frames, a sixth to a quarter of the speed.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
+    /// Threads the tracker may use (0: one per core; 1: none beside the search).
+    /// Features are computed ahead of the search and the initialisation's fits
+    /// run side by side; the result is the same for any number.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
     /// Frame to initialise on (default: chosen automatically).
     #[arg(long)]
     init_frame: Option<usize>,
@@ -235,6 +240,11 @@ struct BenchArgs {
     /// frame the group search and the jumps leave poorly fitted; 0 for none.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
+    /// Threads the tracker may use (0: one per core; 1: none beside the search).
+    /// Features are computed ahead of the search and the initialisation's fits
+    /// run side by side; the result is the same for any number.
+    #[arg(long, default_value_t = 0)]
+    threads: usize,
     /// The joint polish runs on frames whose model covers the silhouette with an IoU
     /// under this (above 1 for every frame).
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_iou)]
@@ -563,6 +573,15 @@ fn parse_list<T: std::str::FromStr>(flag: &str, text: &str) -> Result<Vec<T>> {
 }
 
 /// `--polish-evals` within [`monocap::track::tracker::MAX_POLISH_EVALS`].
+/// `--threads`: 0 (one per core) to the tracker's most.
+fn check_threads(n: usize) -> Result<usize> {
+    let most = monocap::track::tracker::MAX_THREADS;
+    if n > most {
+        anyhow::bail!("--threads {n}: expected 0 (one per core) to {most}");
+    }
+    Ok(n)
+}
+
 fn check_polish_evals(n: usize) -> Result<()> {
     use monocap::track::tracker::MAX_POLISH_EVALS;
     if n > MAX_POLISH_EVALS {
@@ -588,6 +607,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     opts.track.restarts = a.restarts;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
+    opts.track.threads = check_threads(a.threads)?;
     if a.polish_iou.is_nan() || a.polish_iou < 0.0 {
         anyhow::bail!(
             "--polish-iou {}: expected a number from 0 (never) up",
@@ -748,6 +768,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     opts.silhouettes.background.empty = parse_empty_frames(&a.empty_frames)?;
     opts.track.restarts = a.restarts;
     opts.track.polish_evals = a.polish_evals;
+    opts.track.threads = check_threads(a.threads)?;
     opts.track.init_frame = a.init_frame;
     a.weights.apply(&mut opts.track.weights)?;
     opts.track.features.core_weight = a.w_core;

@@ -334,6 +334,11 @@ fn bad_input_gives_one_clear_line() {
         &monocap(&["track", s(&clip), "-o", s(&out), "--fov-deg", "0"]),
         "field of view",
     );
+    assert_fails_with(
+        "threads",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--threads", "100000"]),
+        "--threads 100000",
+    );
     assert!(!out.exists(), "nothing written on failure");
 }
 
@@ -608,4 +613,91 @@ fn a_person_turned_out_of_reach_is_covered_again() {
     }
     let last = track.frames.last().unwrap();
     assert!(last.iou.unwrap() > 0.7, "IoU {:.3}", last.iou.unwrap());
+}
+
+/// The fixture's run in colour (so the inner outlines are weighed too), with its
+/// true silhouettes, as the tracker's input.
+fn run_colour_inputs() -> (Vec<FrameInput>, SynthOptions) {
+    let bvh = Bvh::read(Path::new(FIXTURE)).unwrap();
+    let opts = SynthOptions {
+        style: Style::Color,
+        ..SynthOptions::default()
+    };
+    let mut frames = Vec::new();
+    synthesize_with(&bvh, "fixture", &opts, |f| {
+        let Frame::Rgb(img) = f.image else {
+            panic!("a colour clip gives colour frames");
+        };
+        frames.push(FrameInput {
+            silhouette: f.mask.clone(),
+            image: Some(img.clone()),
+        });
+        Ok(())
+    })
+    .unwrap();
+    (frames, opts)
+}
+
+/// Features computed on helper threads ahead of the search, and the
+/// initialisation's fits side by side, change nothing: the same poses, shape and
+/// costs, and the same progress reports, as on the caller's thread alone; a bad
+/// frame in the middle is reported as such, after the frames before it.
+#[test]
+fn helper_threads_track_exactly_as_one_thread() {
+    let (frames, opts) = run_colour_inputs();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let run = |threads: usize, frames: Vec<FrameInput>| {
+        let tracker = Tracker::new(
+            cam.clone(),
+            TrackOptions {
+                threads,
+                // Initialise after 8 frames, so that the rest is streamed.
+                init_window: 8,
+                ..TrackOptions::default()
+            },
+        );
+        let n = frames.len();
+        let mut reported = Vec::new();
+        let track = tracker.track(frames.into_iter().map(Ok), Some(n), |f, _| {
+            reported.push(f.index);
+            ControlFlow::Continue(())
+        });
+        (track, reported)
+    };
+    let copy = |frames: &[FrameInput]| -> Vec<FrameInput> {
+        frames
+            .iter()
+            .map(|f| FrameInput {
+                silhouette: f.silhouette.clone(),
+                image: f.image.clone(),
+            })
+            .collect()
+    };
+    let (one, one_reported) = run(1, copy(&frames));
+    let one = one.unwrap();
+    for threads in [2, 3] {
+        let (many, many_reported) = run(threads, copy(&frames));
+        let many = many.unwrap();
+        assert_eq!(many.shape, one.shape, "{threads} threads: shape");
+        assert_eq!(many.init_frame, one.init_frame, "{threads} threads");
+        assert_eq!(many.frames, one.frames, "{threads} threads: frames");
+        assert_eq!(many_reported, one_reported, "{threads} threads: reports");
+    }
+
+    // Frame 14 of another size: the frames before it are tracked and reported, then
+    // the error names frame 14.
+    let mut bad = copy(&frames);
+    bad[14].silhouette = Mask::new(opts.width / 2, opts.height);
+    let (track, reported) = run(3, bad);
+    match track {
+        Err(monocap::track::tracker::TrackError::FrameSize { index, .. }) => {
+            assert_eq!(index, 14)
+        }
+        other => panic!("expected a frame size error, got {other:?}"),
+    }
+    assert_eq!(
+        reported.len(),
+        14,
+        "frames before the bad one: {reported:?}"
+    );
 }

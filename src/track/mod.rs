@@ -6,6 +6,7 @@ pub mod keyframes;
 pub mod metrics;
 pub mod objective;
 pub mod outlines;
+mod prefetch;
 pub mod run;
 pub mod simplex;
 pub mod tracker;

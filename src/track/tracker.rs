@@ -38,6 +38,8 @@ use super::flips::Jump;
 use super::keyframes::{KeyframeError, Keyframes};
 use super::objective::{sole_height, Evaluator, Target, Weights};
 use super::outlines::Outlines;
+pub use super::prefetch::MAX_THREADS;
+use super::prefetch::{default_threads, par_map, Prefetch};
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
@@ -45,7 +47,7 @@ use crate::body::params::{
 };
 use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
-use crate::vision::features::{compute, FeatureOptions, FrameFeatures};
+use crate::vision::features::{link, FeatureOptions, FrameFeatures};
 
 /// A silhouette lower than this many pixels is not a person (noise, a speck).
 const MIN_PERSON_HEIGHT: f64 = 8.0;
@@ -174,6 +176,12 @@ pub struct TrackOptions {
     /// at the next step, also inside the initialisation, which reports no frame for
     /// a while (how a service cancels a job promptly).
     pub stop: Option<std::sync::Arc<std::sync::atomic::AtomicBool>>,
+    /// Threads the tracker may use; 0 (the default) for one per core, 1 to keep
+    /// all the work on the caller's thread. Beyond one, each frame's features are
+    /// computed on helper threads ahead of the search, and the initialisation's
+    /// independent fits run side by side; the result is the same whatever the
+    /// number. At most [`MAX_THREADS`] are used.
+    pub threads: usize,
 }
 
 impl Default for TrackOptions {
@@ -195,6 +203,7 @@ impl Default for TrackOptions {
             initial: None,
             known_shape: None,
             stop: None,
+            threads: 0,
         }
     }
 }
@@ -233,7 +242,9 @@ pub struct Progress {
 /// Where the time went (seconds).
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Timing {
-    /// Silhouette features and the objective's per-frame maps.
+    /// Silhouette features and the objective's per-frame maps: the time the
+    /// tracker's own thread spent on them or waiting for its helpers' (features
+    /// computed ahead while it searched do not count).
     pub features: f64,
     /// The search (objective evaluations and simplex bookkeeping).
     pub search: f64,
@@ -326,41 +337,54 @@ impl Tracker {
         &self,
         frames: impl Iterator<Item = anyhow::Result<FrameInput>>,
         total: Option<usize>,
-        mut on_frame: impl FnMut(&TrackedFrame, &Progress) -> ControlFlow<()>,
+        on_frame: impl FnMut(&TrackedFrame, &Progress) -> ControlFlow<()>,
     ) -> Result<Track, TrackError> {
         let started = Instant::now();
-        let mut timing = Timing::default();
-        let (w, h) = (self.camera.width, self.camera.height);
         self.check(total)?;
-        let mut frames = frames.enumerate();
+        let size = (self.camera.width, self.camera.height);
+        let threads = self.threads();
+        let helpers = if threads > 1 { threads } else { 0 };
+        std::thread::scope(|scope| {
+            let frames = Prefetch::new(scope, frames, size, helpers, &self.opts.features);
+            self.track_prefetched(frames, total, started, on_frame)
+        })
+    }
+
+    /// The threads this tracker uses ([`TrackOptions::threads`], 0 for the machine's
+    /// cores).
+    fn threads(&self) -> usize {
+        match self.opts.threads {
+            0 => default_threads(),
+            n => n,
+        }
+        .min(MAX_THREADS)
+    }
+
+    fn track_prefetched(
+        &self,
+        mut frames: Prefetch<impl Iterator<Item = anyhow::Result<FrameInput>>>,
+        total: Option<usize>,
+        started: Instant,
+        mut on_frame: impl FnMut(&TrackedFrame, &Progress) -> ControlFlow<()>,
+    ) -> Result<Track, TrackError> {
+        let mut timing = Timing::default();
         let mut prev_features: Option<FrameFeatures> = None;
-        let next_target = |index: usize,
-                           input: FrameInput,
-                           prev: &mut Option<FrameFeatures>,
-                           timing: &mut Timing|
-         -> Result<(Option<Target>, f64), TrackError> {
-            if input.silhouette.width() != w || input.silhouette.height() != h {
-                return Err(TrackError::FrameSize {
-                    index,
-                    width: input.silhouette.width(),
-                    height: input.silhouette.height(),
-                    expected_w: w,
-                    expected_h: h,
-                });
-            }
+        // The next frame's index, target (None without a person) and score as an
+        // initial frame; None after the last frame.
+        type Next = Option<Result<(usize, Option<Target>, f64), TrackError>>;
+        let mut next_target = |prev: &mut Option<FrameFeatures>, timing: &mut Timing| -> Next {
             let t0 = Instant::now();
-            let f = compute(
-                &input.silhouette,
-                input.image.as_ref(),
-                prev.as_ref(),
-                &self.opts.features,
-            );
+            let (index, mut f) = match frames.next()? {
+                Ok(next) => next,
+                Err(e) => return Some(Err(e)),
+            };
+            link(&mut f, prev.as_ref(), &self.opts.features);
             let score = init_score(&f);
             let target =
                 (f.body_height >= MIN_PERSON_HEIGHT).then(|| Target::new(&f, &self.opts.weights));
             *prev = Some(f);
             timing.features += t0.elapsed().as_secs_f64();
-            Ok((target, score))
+            Some(Ok((index, target, score)))
         };
 
         // Phase 1: buffer frames until the initial frame is known.
@@ -379,13 +403,12 @@ impl Tracker {
             if enough {
                 break;
             }
-            let Some((i, input)) = frames.next() else {
+            let Some(next) = next_target(&mut prev_features, &mut timing) else {
                 exhausted = true;
                 break;
             };
-            let input = input.map_err(TrackError::Input)?;
+            let (_, target, score) = next?;
             self.check_stop()?;
-            let (target, score) = next_target(i, input, &mut prev_features, &mut timing)?;
             if target.is_some() {
                 person_frames += 1;
             }
@@ -456,20 +479,26 @@ impl Tracker {
                         .flatten()
                 })
                 .collect();
-            let mut totals: Vec<(f64, Pose)> = Vec::with_capacity(candidates.len());
-            for c in &candidates {
-                let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
-                probe.weigh_outlines = false;
-                let mut total = 0.0;
-                for run in [&after, &before] {
-                    let mut history = History::new(*c);
-                    for &i in run.iter() {
-                        self.check_stop()?;
-                        let t = paper[i].as_ref().or(pending[i].target.as_ref());
-                        total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
+            // Each candidate's probe is independent of the others': side by side.
+            let probed: Vec<Result<(f64, u64), TrackError>> =
+                par_map(&candidates, self.threads(), |c| {
+                    let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
+                    probe.weigh_outlines = false;
+                    let mut total = 0.0;
+                    for run in [&after, &before] {
+                        let mut history = History::new(*c);
+                        for &i in run.iter() {
+                            self.check_stop()?;
+                            let t = paper[i].as_ref().or(pending[i].target.as_ref());
+                            total += probe.step(i, t, &mut history).cost.unwrap_or(0.0);
+                        }
                     }
-                }
-                timing.evals += probe.evals;
+                    Ok((total, probe.evals))
+                });
+            let mut totals: Vec<(f64, Pose)> = Vec::with_capacity(candidates.len());
+            for (c, probed) in candidates.iter().zip(probed) {
+                let (total, evals) = probed?;
+                timing.evals += evals;
                 totals.push((total, *c));
             }
             choose_hypothesis(&totals, &self.camera)
@@ -529,9 +558,8 @@ impl Tracker {
 
         // Phase 4: stream the rest.
         let mut out: Vec<TrackedFrame> = results.into_iter().map(|r| r.expect("tracked")).collect();
-        for (i, input) in frames {
-            let input = input.map_err(TrackError::Input)?;
-            let (target, _) = next_target(i, input, &mut prev_features, &mut timing)?;
+        while let Some(next) = next_target(&mut prev_features, &mut timing) {
+            let (i, target, _) = next?;
             let t0 = Instant::now();
             let f = search.step(i, target.as_ref(), &mut history);
             timing.search += t0.elapsed().as_secs_f64();
@@ -602,30 +630,28 @@ impl Tracker {
         base[ix::L_SHOULDER + 1] = 15.0;
         base[ix::R_SHOULDER + 1] = 15.0;
 
-        let wide = Search::new(self, &standard, f64::NEG_INFINITY);
-        let mut fits: Vec<(f64, Pose)> = (0..12)
-            .map(|k| {
-                let mut p = base;
-                p[ix::ROOT_RY] = k as f64 * 30.0 - 150.0;
-                if self.stopping() {
-                    return (f64::INFINITY, p);
-                }
-                let (pose, cost) = wide.fit_wide(target, p, 2);
-                (cost, pose)
-            })
-            .collect();
+        // Each heading's fit is independent of the others': side by side.
+        let threads = self.threads();
+        let wide = || Search::new(self, &standard, f64::NEG_INFINITY);
+        let headings: Vec<i32> = (0..12).collect();
+        let mut fits: Vec<(f64, Pose)> = par_map(&headings, threads, |&k| {
+            let mut p = base;
+            p[ix::ROOT_RY] = k as f64 * 30.0 - 150.0;
+            if self.stopping() {
+                return (f64::INFINITY, p);
+            }
+            let (pose, cost) = wide().fit_wide(target, p, 2);
+            (cost, pose)
+        });
         fits.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut refined: Vec<(f64, Pose)> = fits
-            .iter()
-            .take(4)
-            .map(|(c, p)| {
+        let mut refined: Vec<(f64, Pose)> =
+            par_map(&fits[..4.min(fits.len())], threads, |(c, p)| {
                 if self.stopping() {
                     return (*c, *p);
                 }
-                let (pose, cost) = wide.fit_wide(target, *p, 3);
+                let (pose, cost) = wide().fit_wide(target, *p, 3);
                 (cost, pose)
-            })
-            .collect();
+            });
         refined.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut pose = refined[0].1;
         let heading = |p: &Pose| p[ix::ROOT_RY];

@@ -181,6 +181,19 @@ pub fn compute(
     previous: Option<&FrameFeatures>,
     opts: &FeatureOptions,
 ) -> FrameFeatures {
+    let mut f = compute_unlinked(silhouette, frame, opts);
+    link(&mut f, previous, opts);
+    f
+}
+
+/// [`compute`] without the temporal coherence: everything that depends on this
+/// frame alone, nearly all of the work. Frames can go through it in any order, or
+/// side by side; [`link`] then adds the coherence in frame order.
+pub fn compute_unlinked(
+    silhouette: &Mask,
+    frame: Option<&RgbImage>,
+    opts: &FeatureOptions,
+) -> FrameFeatures {
     let (w, h) = (silhouette.width(), silhouette.height());
     let inside = distance_transform(silhouette, false);
     let outside = distance_transform(silhouette, true);
@@ -254,11 +267,20 @@ pub fn compute(
     for e in &mut cands {
         e.kind = classify(e.pos, f.head, bbox, body_h);
     }
-    if let Some(prev) = previous {
-        coherence(&mut cands, prev, opts.max_jump * body_h);
-    }
     f.extremities = cands;
     f
+}
+
+/// The temporal coherence of [`compute`] (its rule), applied to the features of
+/// [`compute_unlinked`] given the previous frame's (linked) features.
+pub fn link(f: &mut FrameFeatures, previous: Option<&FrameFeatures>, opts: &FeatureOptions) {
+    // As in [`compute_unlinked`]: no person, or too small for classified candidates.
+    if f.bbox.is_none() || f.body_height < opts.min_body_height as f64 {
+        return;
+    }
+    if let Some(prev) = previous {
+        coherence(&mut f.extremities, prev, opts.max_jump * f.body_height);
+    }
 }
 
 /// Exact Euclidean distance from each pixel to the nearest pixel whose value is
