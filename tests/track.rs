@@ -700,4 +700,38 @@ fn helper_threads_track_exactly_as_one_thread() {
         14,
         "frames before the bad one: {reported:?}"
     );
+
+    // An input that fails at frame 14 is not read any further.
+    let tracker = Tracker::new(
+        cam.clone(),
+        TrackOptions {
+            threads: 3,
+            init_window: 8,
+            ..TrackOptions::default()
+        },
+    );
+    let pulled = std::cell::Cell::new(0usize);
+    let failing = copy(&frames).into_iter().enumerate().map(|(i, f)| {
+        pulled.set(pulled.get() + 1);
+        if i == 14 {
+            anyhow::bail!("frame 14 is corrupt");
+        }
+        Ok(f)
+    });
+    let r = tracker.track(
+        failing,
+        Some(frames.len()),
+        |_, _| ControlFlow::Continue(()),
+    );
+    match r {
+        Err(monocap::track::tracker::TrackError::Input(e)) => {
+            assert!(e.to_string().contains("frame 14"), "{e}")
+        }
+        other => panic!("expected an input error, got {other:?}"),
+    }
+    assert_eq!(
+        pulled.get(),
+        15,
+        "frames read: through the failing one only"
+    );
 }

@@ -95,7 +95,9 @@ impl<I: Iterator<Item = anyhow::Result<FrameInput>>> Prefetch<I> {
         }
     }
 
-    /// Reads input frames until `ahead` are on their way (or the input ends).
+    /// Reads input frames until `ahead` are on their way (or the input ends). A
+    /// frame that fails ends the reading: the input is not asked for more, as
+    /// tracking ends there.
     fn fill(&mut self) {
         while !self.exhausted && self.queue.len() < self.ahead.max(1) {
             let Some((index, input)) = self.inputs.next() else {
@@ -106,6 +108,7 @@ impl<I: Iterator<Item = anyhow::Result<FrameInput>>> Prefetch<I> {
                 Err(e) => Slot::Failed(TrackError::Input(e)),
                 Ok(input) => self.start(index, input),
             };
+            self.exhausted = matches!(slot, Slot::Failed(_));
             self.queue.push_back(slot);
         }
     }
