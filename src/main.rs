@@ -572,7 +572,6 @@ fn parse_list<T: std::str::FromStr>(flag: &str, text: &str) -> Result<Vec<T>> {
         .collect()
 }
 
-/// `--polish-evals` within [`monocap::track::tracker::MAX_POLISH_EVALS`].
 /// `--threads`: 0 (one per core) to the tracker's most.
 fn check_threads(n: usize) -> Result<usize> {
     let most = monocap::track::tracker::MAX_THREADS;
@@ -582,6 +581,7 @@ fn check_threads(n: usize) -> Result<usize> {
     Ok(n)
 }
 
+/// `--polish-evals` within [`monocap::track::tracker::MAX_POLISH_EVALS`].
 fn check_polish_evals(n: usize) -> Result<()> {
     use monocap::track::tracker::MAX_POLISH_EVALS;
     if n > MAX_POLISH_EVALS {
