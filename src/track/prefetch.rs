@@ -32,15 +32,13 @@ enum Slot {
     Failed(TrackError),
 }
 
-type Job = FrameInput;
-
 /// The input frames' unlinked features ([`compute_unlinked`]), in frame order,
 /// computed up to `ahead` frames before they are asked for.
 pub(crate) struct Prefetch<I> {
     inputs: std::iter::Enumerate<I>,
     exhausted: bool,
     size: (u32, u32),
-    workers: Vec<(SyncSender<Job>, Receiver<FrameFeatures>)>,
+    workers: Vec<(SyncSender<FrameInput>, Receiver<FrameFeatures>)>,
     /// The next helper to send a frame to (round robin, so each helper's results
     /// come back in frame order).
     next_worker: usize,
@@ -59,13 +57,14 @@ impl<I: Iterator<Item = anyhow::Result<FrameInput>>> Prefetch<I> {
         helpers: usize,
         opts: &FeatureOptions,
     ) -> Prefetch<I> {
-        let ahead = 2 * helpers;
+        // At most `ahead` (≤ capacity) frames are in flight: no send ever waits.
+        let capacity = 2 * helpers;
         // A helper the system cannot start is done without (its frames go to the
         // others, or are computed here).
         let workers: Vec<_> = (0..helpers)
             .map_while(|_| {
-                let (job_tx, job_rx) = sync_channel::<Job>(ahead);
-                let (out_tx, out_rx) = sync_channel::<FrameFeatures>(ahead);
+                let (job_tx, job_rx) = sync_channel::<FrameInput>(capacity);
+                let (out_tx, out_rx) = sync_channel::<FrameFeatures>(capacity);
                 let opts = opts.clone();
                 std::thread::Builder::new()
                     .name("monocap-features".into())
