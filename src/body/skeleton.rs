@@ -289,24 +289,62 @@ impl Skeleton {
 
     /// Forward kinematics: the world frame of every joint for pose β.
     pub fn pose(&self, pose: &Pose, out: &mut Posed) {
+        self.pose_keeping(pose, None, out);
+    }
+
+    /// [`Skeleton::pose`] for the joints `moved` marks (parents before children: a
+    /// joint moves when its parent does) and the tips on them; every other joint and
+    /// tip is copied from `base`, which must be `pose` posed in full. The same result
+    /// as posing in full, for fewer joints' rotations.
+    pub fn pose_moved(
+        &self,
+        pose: &Pose,
+        base: &Posed,
+        moved: &[bool; JOINT_COUNT],
+        out: &mut Posed,
+    ) {
+        self.pose_keeping(pose, Some((base, moved)), out);
+    }
+
+    /// Poses every joint, or only the moved ones of `keep` (the rest copied).
+    fn pose_keeping(
+        &self,
+        pose: &Pose,
+        keep: Option<(&Posed, &[bool; JOINT_COUNT])>,
+        out: &mut Posed,
+    ) {
+        let kept = |i: usize| keep.filter(|(_, moved)| !moved[i]).map(|(base, _)| base);
         for j in Joint::ALL {
-            let local = match j.dof() {
-                Dof::Root => IsometryMatrix3::from_parts(
-                    Translation3::new(pose[ix::ROOT_TX], pose[ix::ROOT_TY], pose[ix::ROOT_TZ]),
-                    root_rotation(pose),
-                ),
-                dof => IsometryMatrix3::from_parts(
-                    Translation3::from(self.offsets[j.index()]),
-                    joint_rotation(dof, pose),
-                ),
-            };
-            out.joints[j.index()] = match j.parent() {
+            let i = j.index();
+            if let Some(base) = kept(i) {
+                out.joints[i] = base.joints[i];
+                continue;
+            }
+            let local = self.local(j, pose);
+            out.joints[i] = match j.parent() {
                 Some(p) => out.joints[p.index()] * local,
                 None => local,
             };
         }
         for (i, t) in Tip::ALL.iter().enumerate() {
-            out.tips[i] = out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]);
+            out.tips[i] = match kept(t.joint().index()) {
+                Some(base) => base.tips[i],
+                None => out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]),
+            };
+        }
+    }
+
+    /// Joint `j`'s frame in its parent's at `pose`.
+    fn local(&self, j: Joint, pose: &Pose) -> IsometryMatrix3<f64> {
+        match j.dof() {
+            Dof::Root => IsometryMatrix3::from_parts(
+                Translation3::new(pose[ix::ROOT_TX], pose[ix::ROOT_TY], pose[ix::ROOT_TZ]),
+                root_rotation(pose),
+            ),
+            dof => IsometryMatrix3::from_parts(
+                Translation3::from(self.offsets[j.index()]),
+                joint_rotation(dof, pose),
+            ),
         }
     }
 
@@ -396,6 +434,32 @@ mod tests {
 
     fn close(a: Point3<f64>, b: [f64; 3], tol: f64) -> bool {
         (a - Point3::from(b)).norm() < tol
+    }
+
+    #[test]
+    fn posing_the_moved_joints_alone_matches_posing_all() {
+        let (sk, mut from) = standard_rest();
+        for (k, v) in from.iter_mut().enumerate() {
+            *v += (k as f64 * 1.7).sin() * 12.0;
+        }
+        let base = sk.posed(&from);
+        for g in crate::body::params::Group::ALL {
+            let params: Vec<usize> = g.range().collect();
+            let moved = crate::track::objective::joints_moved_by(&params);
+            let mut pose = from;
+            for &k in &params {
+                pose[k] += 9.0 + k as f64;
+            }
+            let full = sk.posed(&pose);
+            // Filled with the base's frames, so that any joint it failed to pose
+            // stays wrong.
+            let mut part = base.clone();
+            sk.pose_moved(&pose, &base, &moved, &mut part);
+            assert_eq!(part.joints, full.joints, "{}", g.name());
+            assert_eq!(part.tips, full.tips, "{}", g.name());
+            let kept = moved.iter().filter(|m| !**m).count();
+            assert_eq!(kept == 0, g == crate::body::params::Group::Global);
+        }
     }
 
     #[test]

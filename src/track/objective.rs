@@ -238,6 +238,10 @@ pub struct Evaluator<'a> {
     all: Layer,
     limbs: Layer,
     posed: Posed,
+    /// While focused ([`Evaluator::focus`]): the joints the focused parameters move
+    /// (the others are copied from `base`, the focused pose posed in full).
+    moved: Option<[bool; JOINT_COUNT]>,
+    base: Posed,
     /// Evaluations so far.
     pub evals: u64,
 }
@@ -264,6 +268,8 @@ impl<'a> Evaluator<'a> {
             all: Layer::new(cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect()),
             limbs: Layer::new(cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect()),
             posed: Posed::default(),
+            moved: None,
+            base: Posed::default(),
             evals: 0,
         }
     }
@@ -281,17 +287,18 @@ impl<'a> Evaluator<'a> {
         self.limbs.moving = (0..PART_COUNT)
             .filter(|&i| moving(i) && is_limb(i))
             .collect();
-        self.body.skeleton.pose(pose, &mut self.posed);
+        self.body.skeleton.pose(pose, &mut self.base);
+        self.moved = Some(moves);
         self.all.fix(
             self.body,
-            &self.posed,
+            &self.base,
             self.cam,
             &fixed_all,
             &self.target.gain,
         );
         self.limbs.fix(
             self.body,
-            &self.posed,
+            &self.base,
             self.cam,
             &fixed_limbs,
             &self.target.limb_gain,
@@ -300,6 +307,7 @@ impl<'a> Evaluator<'a> {
 
     /// Every part moves again.
     pub fn unfocus(&mut self) {
+        self.moved = None;
         self.all.unfix((0..PART_COUNT).filter(|&i| !is_limb(i)));
         self.limbs.unfix((0..PART_COUNT).filter(|&i| is_limb(i)));
     }
@@ -310,7 +318,13 @@ impl<'a> Evaluator<'a> {
         if !within_limits(pose) {
             return f64::INFINITY;
         }
-        self.body.skeleton.pose(pose, &mut self.posed);
+        match &self.moved {
+            Some(moved) => self
+                .body
+                .skeleton
+                .pose_moved(pose, &self.base, moved, &mut self.posed),
+            None => self.body.skeleton.pose(pose, &mut self.posed),
+        }
         if self.below_ground() {
             return f64::INFINITY;
         }
