@@ -21,6 +21,7 @@
 
 use nalgebra::Point3;
 
+use super::objective::joints_moved_by;
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{ix, Group, Pose, MOTION};
 use crate::body::skeleton::{Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
@@ -329,8 +330,14 @@ fn fit_landmarks<const N: usize>(
         }
         p
     };
-    let misfit = |x: &[f64]| -> f64 {
-        let got = body.posed(&fit(x)).landmarks();
+    // Only the joints the parameters move are posed again for each trial.
+    let moved = joints_moved_by(params);
+    let posed_base = body.posed(&base);
+    let mut posed = posed_base.clone();
+    let mut misfit = |x: &[f64]| -> f64 {
+        body.skeleton
+            .pose_moved(&fit(x), &posed_base, &moved, &mut posed);
+        let got = posed.landmarks();
         (0..LANDMARK_COUNT)
             .map(|i| (got[i] - target[i]).norm_squared())
             .sum()
@@ -346,9 +353,9 @@ fn fit_landmarks<const N: usize>(
     // A second pass (fresh steps) only when the first stopped far from the targets.
     let mut best: Option<(f64, Vec<f64>)> = None;
     for seed in seeds {
-        let mut r = minimize(misfit, &seed, &steps, &lo, &hi, &opts);
+        let mut r = minimize(&mut misfit, &seed, &steps, &lo, &hi, &opts);
         if r.f > CLOSE_CM2 {
-            let again = minimize(misfit, &r.x, &steps, &lo, &hi, &opts);
+            let again = minimize(&mut misfit, &r.x, &steps, &lo, &hi, &opts);
             if again.f < r.f {
                 r = again;
             }
