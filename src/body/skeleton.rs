@@ -294,8 +294,9 @@ impl Skeleton {
 
     /// [`Skeleton::pose`] for the joints `moved` marks (parents before children: a
     /// joint moves when its parent does) and the tips on them; every other joint and
-    /// tip is copied from `base`, which must be `pose` posed in full. The same result
-    /// as posing in full, for fewer joints' rotations.
+    /// tip is copied from `base`, a pose posed in full that differs from `pose` only
+    /// in parameters of moved joints. The same result as posing in full, for fewer
+    /// joints' rotations.
     pub fn pose_moved(
         &self,
         pose: &Pose,
