@@ -462,14 +462,23 @@ fn floor_i64(x: f64) -> i64 {
     }
 }
 
+/// The ray o + t·d against a canonical cylinder's infinite side (x² + z² = 1):
+/// (a, b, c) of a·t² + 2b·t + c = 0.
+#[inline]
+fn side_quadratic(o: &Vector3<f64>, d: &Vector3<f64>) -> (f64, f64, f64) {
+    (
+        d.x * d.x + d.z * d.z,
+        o.x * d.x + o.z * d.z,
+        o.x * o.x + o.z * o.z - 1.0,
+    )
+}
+
 /// Whether [`cylinder_interval`] finds an interval, without its divisions (it runs
 /// at both ends of every row of a cylinder drawn): the side's roots and the slab's
 /// bounds are compared scaled by the positive leading coefficient.
 #[inline]
 fn cylinder_hit(o: &Vector3<f64>, d: &Vector3<f64>) -> bool {
-    let a = d.x * d.x + d.z * d.z;
-    let b = o.x * d.x + o.z * d.z;
-    let c = o.x * o.x + o.z * o.z - 1.0;
+    let (a, b, c) = side_quadratic(o, d);
     if a < 1e-18 {
         return !(c > 0.0 || d.y.abs() < 1e-18);
     }
@@ -485,9 +494,7 @@ fn cylinder_hit(o: &Vector3<f64>, d: &Vector3<f64>) -> bool {
 }
 
 fn cylinder_interval(o: &Vector3<f64>, d: &Vector3<f64>) -> Option<(f64, f64)> {
-    let a = d.x * d.x + d.z * d.z;
-    let b = o.x * d.x + o.z * d.z;
-    let c = o.x * o.x + o.z * o.z - 1.0;
+    let (a, b, c) = side_quadratic(o, d);
     if a < 1e-18 {
         // Along the axis: inside the tube or not at all.
         if c > 0.0 || d.y.abs() < 1e-18 {
@@ -730,8 +737,8 @@ mod tests {
             // Only a ray grazing a cap's rim (a root's height within rounding of 0
             // or 1) may be judged apart.
             let grazing = {
-                let (a, b) = (d.x * d.x + d.z * d.z, o.x * d.x + o.z * d.z);
-                let disc = b * b - a * (o.x * o.x + o.z * o.z - 1.0);
+                let (a, b, c) = side_quadratic(&o, &d);
+                let disc = b * b - a * c;
                 disc >= 0.0 && a >= 1e-18 && [-1.0, 1.0].iter().any(|sg| {
                     let y = o.y + (-b + sg * disc.sqrt()) / a * d.y;
                     y.abs() < 1e-9 || (y - 1.0).abs() < 1e-9

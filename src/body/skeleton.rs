@@ -424,6 +424,26 @@ impl Posed {
     }
 }
 
+/// Which joints move when the parameters `params` change: a joint moves when it or
+/// one of its ancestors takes one of them.
+pub fn joints_moved_by(params: &[usize]) -> [bool; JOINT_COUNT] {
+    let takes = |j: Joint| -> bool {
+        let r = match j.dof() {
+            Dof::Root => 0..6,
+            Dof::Three(i) => i..i + 3,
+            Dof::One(i) => i..i + 1,
+            Dof::Fixed => 0..0,
+        };
+        params.iter().any(|p| r.contains(p))
+    };
+    let mut out = [false; JOINT_COUNT];
+    for j in Joint::ALL {
+        // Parents come before children in Joint::ALL.
+        out[j.index()] = takes(j) || j.parent().is_some_and(|p| out[p.index()]);
+    }
+    out
+}
+
 /// The standard body standing at rest, for tests and defaults.
 pub fn standard_rest() -> (Skeleton, Pose) {
     (Skeleton::new(&params::STANDARD_SHAPE), params::rest_pose())
@@ -438,6 +458,17 @@ mod tests {
     }
 
     #[test]
+    fn moved_joints_follow_the_hierarchy() {
+        let m = joints_moved_by(&[ix::L_ELBOW]);
+        assert!(m[Joint::LeftForeArm.index()] && m[Joint::LeftHand.index()]);
+        assert!(!m[Joint::LeftArm.index()] && !m[Joint::Hips.index()]);
+        let all = joints_moved_by(&[ix::ROOT_RY]);
+        assert!(all.iter().all(|&b| b));
+        let spine = joints_moved_by(&[ix::SPINE]);
+        assert!(spine[Joint::RightHand.index()] && !spine[Joint::LeftLeg.index()]);
+    }
+
+    #[test]
     fn posing_the_moved_joints_alone_matches_posing_all() {
         let (sk, mut from) = standard_rest();
         for (k, v) in from.iter_mut().enumerate() {
@@ -446,7 +477,7 @@ mod tests {
         let base = sk.posed(&from);
         for g in crate::body::params::Group::ALL {
             let params: Vec<usize> = g.range().collect();
-            let moved = crate::track::objective::joints_moved_by(&params);
+            let moved = joints_moved_by(&params);
             let mut pose = from;
             for &k in &params {
                 pose[k] += 9.0 + k as f64;

@@ -21,10 +21,9 @@
 
 use nalgebra::Point3;
 
-use super::objective::joints_moved_by;
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{ix, Group, Pose, MOTION};
-use crate::body::skeleton::{Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
+use crate::body::skeleton::{joints_moved_by, Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
 use crate::body::Body;
 
 /// One flip: the bones it moves, each (end, its parent, flipped or kept), parents

@@ -22,7 +22,7 @@
 use super::outlines::FrameEdges;
 use crate::body::params::{within_limits, Pose};
 use crate::body::raster::{render_parts, Mask};
-use crate::body::skeleton::{Dof, Joint, Posed, Tip, JOINT_COUNT};
+use crate::body::skeleton::{joints_moved_by, Joint, Posed, Tip, JOINT_COUNT};
 use crate::body::{Body, Camera, PART_COUNT};
 use crate::vision::features::{ExtremityKind, FrameFeatures};
 use nalgebra::Point3;
@@ -579,26 +579,6 @@ fn sum_over(gain: &[f32], m: &Mask, except: Option<&Mask>, y0: u32, y1: u32) -> 
     total as f64
 }
 
-/// Which joints move when the parameters `params` change: a joint moves when it or
-/// one of its ancestors takes one of them.
-pub fn joints_moved_by(params: &[usize]) -> [bool; JOINT_COUNT] {
-    let takes = |j: Joint| -> bool {
-        let r = match j.dof() {
-            Dof::Root => 0..6,
-            Dof::Three(i) => i..i + 3,
-            Dof::One(i) => i..i + 1,
-            Dof::Fixed => 0..0,
-        };
-        params.iter().any(|p| r.contains(p))
-    };
-    let mut out = [false; JOINT_COUNT];
-    for j in Joint::ALL {
-        // Parents come before children in Joint::ALL.
-        out[j.index()] = takes(j) || j.parent().is_some_and(|p| out[p.index()]);
-    }
-    out
-}
-
 /// World y of the lowest sole point (heel or toe of either foot).
 pub fn sole_height(body: &Body, posed: &Posed) -> f64 {
     let foot = body.shape()[crate::body::params::sx::FOOT];
@@ -775,16 +755,5 @@ mod tests {
         let mut jumped = pose;
         jumped[ix::ROOT_TY] += 10.0;
         assert!(ev.cost(&jumped).is_finite());
-    }
-
-    #[test]
-    fn moved_joints_follow_the_hierarchy() {
-        let m = joints_moved_by(&[ix::L_ELBOW]);
-        assert!(m[Joint::LeftForeArm.index()] && m[Joint::LeftHand.index()]);
-        assert!(!m[Joint::LeftArm.index()] && !m[Joint::Hips.index()]);
-        let all = joints_moved_by(&[ix::ROOT_RY]);
-        assert!(all.iter().all(|&b| b));
-        let spine = joints_moved_by(&[ix::SPINE]);
-        assert!(spine[Joint::RightHand.index()] && !spine[Joint::LeftLeg.index()]);
     }
 }
