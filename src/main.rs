@@ -192,6 +192,14 @@ struct TrackArgs {
     /// frames, a sixth to a quarter of the speed.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
+    /// The smoothed refit: each frame searched again from the Gaussian average of
+    /// its neighbours' poses, this many frames wide (0 for none); on a helper
+    /// thread behind the search when there are two threads or more.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
+    refit_sigma: f64,
+    /// Runs of the search in each frame's refit.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
+    refit_runs: usize,
     /// Threads the tracker may use (0: one per core; 1: none beside the search).
     /// Features are computed ahead of the search and the initialisation's fits
     /// run side by side; the result is the same for any number.
@@ -240,6 +248,14 @@ struct BenchArgs {
     /// frame the group search and the jumps leave poorly fitted; 0 for none.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
+    /// The smoothed refit: each frame searched again from the Gaussian average of
+    /// its neighbours' poses, this many frames wide (0 for none); on a helper
+    /// thread behind the search when there are two threads or more.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
+    refit_sigma: f64,
+    /// Runs of the search in each frame's refit.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
+    refit_runs: usize,
     /// Threads the tracker may use (0: one per core; 1: none beside the search).
     /// Features are computed ahead of the search and the initialisation's fits
     /// run side by side; the result is the same for any number.
@@ -590,6 +606,19 @@ fn check_polish_evals(n: usize) -> Result<()> {
     Ok(())
 }
 
+/// `--refit-sigma` and `--refit-runs`, checked, into `track`.
+fn set_refit(
+    track: &mut monocap::track::tracker::TrackOptions,
+    sigma: f64,
+    runs: usize,
+) -> Result<()> {
+    monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
+        .map_err(anyhow::Error::msg)?;
+    track.refit_sigma = sigma;
+    track.refit_runs = runs;
+    Ok(())
+}
+
 fn bench_command(a: BenchArgs) -> Result<()> {
     use monocap::track::bench::{self, BenchOptions};
     use monocap::track::metrics::Accumulator;
@@ -607,6 +636,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     opts.track.restarts = a.restarts;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
+    set_refit(&mut opts.track, a.refit_sigma, a.refit_runs)?;
     opts.track.threads = check_threads(a.threads)?;
     if a.polish_iou.is_nan() || a.polish_iou < 0.0 {
         anyhow::bail!(
@@ -768,6 +798,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     opts.silhouettes.background.empty = parse_empty_frames(&a.empty_frames)?;
     opts.track.restarts = a.restarts;
     opts.track.polish_evals = a.polish_evals;
+    set_refit(&mut opts.track, a.refit_sigma, a.refit_runs)?;
     opts.track.threads = check_threads(a.threads)?;
     opts.track.init_frame = a.init_frame;
     a.weights.apply(&mut opts.track.weights)?;

@@ -437,6 +437,13 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"polish_evals": 10000}), true);
     check(serde_json::json!({"polish_evals": 10001}), false);
     check(serde_json::json!({"polish_evals": -1}), false);
+    check(serde_json::json!({"refit_sigma": 0.0}), true);
+    check(serde_json::json!({"refit_sigma": 10.0}), true);
+    check(serde_json::json!({"refit_sigma": 10.5}), false);
+    check(serde_json::json!({"refit_sigma": -1.0}), false);
+    check(serde_json::json!({"refit_runs": 20}), true);
+    check(serde_json::json!({"refit_runs": 0}), false);
+    check(serde_json::json!({"refit_runs": 21}), false);
     check(serde_json::json!({"work_height": 32}), true);
     check(serde_json::json!({"work_height": 1080}), true);
     check(serde_json::json!({"work_height": 1081}), false);

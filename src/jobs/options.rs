@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
-use crate::track::tracker::MAX_POLISH_EVALS;
+use crate::track::tracker::{check_refit, MAX_POLISH_EVALS};
 use crate::vision::background::EmptyFrames;
 
 /// Every field is optional; an unknown field is an error, not silently ignored.
@@ -22,6 +22,13 @@ pub struct JobOptions {
     /// (default 0: none; see `TrackOptions::polish_evals`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub polish_evals: Option<usize>,
+    /// The smoothed refit's width in frames, 0 (none) to 10 (default 1.5; see
+    /// `TrackOptions::refit_sigma`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_sigma: Option<f64>,
+    /// Runs of the search in each frame's refit, 1 to 20 (default 2).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_runs: Option<usize>,
     /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub keyframes: Option<serde_json::Value>,
@@ -130,6 +137,10 @@ impl JobOptions {
             }
             o.track.polish_evals = n;
         }
+        let sigma = self.refit_sigma.unwrap_or(o.track.refit_sigma);
+        let runs = self.refit_runs.unwrap_or(o.track.refit_runs);
+        check_refit(sigma, runs, ("refit_sigma", "refit_runs"))?;
+        (o.track.refit_sigma, o.track.refit_runs) = (sigma, runs);
         let w = &mut o.track.weights;
         for (name, v, slot) in [
             ("w_edge", self.w_edge, &mut w.edge),

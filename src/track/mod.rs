@@ -7,6 +7,7 @@ pub mod metrics;
 pub mod objective;
 pub mod outlines;
 mod prefetch;
+mod refit;
 pub mod run;
 pub mod simplex;
 pub mod tracker;

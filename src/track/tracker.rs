@@ -30,6 +30,7 @@
 //! objective prefers.
 
 use std::ops::ControlFlow;
+use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender};
 use std::time::Instant;
 
 use image::RgbImage;
@@ -40,6 +41,7 @@ use super::objective::{sole_height, Evaluator, Target, Weights};
 use super::outlines::Outlines;
 pub use super::prefetch::MAX_THREADS;
 use super::prefetch::{default_threads, par_map, Prefetch};
+use super::refit::{Job, Window};
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
@@ -84,6 +86,38 @@ pub const MAX_POLISH_EVALS: usize = 10_000;
 
 /// Latest user-chosen initial frame (frames before it are buffered).
 pub const MAX_INIT_FRAME: usize = 1800;
+
+/// The smoothed refit's width in frames ([`TrackOptions::refit_sigma`]).
+pub const REFIT_SIGMA: f64 = 1.5;
+/// Runs of the search in each frame's refit ([`TrackOptions::refit_runs`]).
+pub const REFIT_RUNS: usize = 2;
+/// The widest smoothed refit a job may ask for (frames; it averages over three
+/// times as many either side).
+pub const MAX_REFIT_SIGMA: f64 = 10.0;
+/// The most runs of the search a frame's refit may ask for.
+pub const MAX_REFIT_RUNS: usize = 20;
+
+/// Checks [`TrackOptions::refit_sigma`] and [`TrackOptions::refit_runs`]; the
+/// message names what is wrong, spelling the two as `names` (flags or job
+/// options).
+pub fn check_refit(sigma: f64, runs: usize, names: (&str, &str)) -> Result<(), String> {
+    if !(0.0..=MAX_REFIT_SIGMA).contains(&sigma) {
+        return Err(format!(
+            "{} {sigma}: expected 0 (none) to {MAX_REFIT_SIGMA} frames",
+            names.0
+        ));
+    }
+    if !(1..=MAX_REFIT_RUNS).contains(&runs) {
+        return Err(format!(
+            "{} {runs}: expected 1 to {MAX_REFIT_RUNS}",
+            names.1
+        ));
+    }
+    Ok(())
+}
+
+/// Frames handed to the refit's helper thread before the tracker waits for it.
+const REFIT_QUEUE: usize = 4;
 
 /// Tuning of the tracker. Defaults follow the paper where it gives a value.
 #[derive(Clone, Debug)]
@@ -152,6 +186,16 @@ pub struct TrackOptions {
     /// the evaluations where the fit is poor keeps most of the speed (polishing
     /// every frame cost a third of it).
     pub polish_iou: f64,
+    /// The smoothed refit ([`super::refit`]): each frame searched again from the
+    /// Gaussian average of its neighbours' poses, this many frames wide (its
+    /// standard deviation; 0 for none), the answer replacing the first pass's.
+    /// It runs on a helper thread a few frames behind the search when there are
+    /// two threads or more. Keyframes' frames, and the initial frame when its pose
+    /// is given ([`TrackOptions::initial`]), keep the first pass's answer. See the
+    /// README's "The smoothed refit" for what it was measured to do.
+    pub refit_sigma: f64,
+    /// Runs of the hierarchical search in each frame's refit.
+    pub refit_runs: usize,
     /// A frame whose model covers its silhouette with an IoU under this is taken for
     /// a loss and searched again widely, at most every fifth frame (0.75 by default,
     /// 0 for never): wide fits from the result and from it turned 60° either way.
@@ -194,6 +238,8 @@ impl Default for TrackOptions {
             polish_evals: POLISH_EVALS,
             polish_iou: POLISH_IOU,
             recover_iou: RECOVER_IOU,
+            refit_sigma: REFIT_SIGMA,
+            refit_runs: REFIT_RUNS,
             init_frame: None,
             init_window: 60,
             fps: 30.0,
@@ -330,9 +376,13 @@ impl Tracker {
         Ok(())
     }
 
-    /// Tracks every frame of `frames`, calling `on_frame` after each (frames before
-    /// the initial frame are reported after it, in backward order; return
-    /// `ControlFlow::Break` to cancel). `total`, when known, is reported in progress.
+    /// Tracks every frame of `frames`, calling `on_frame` with each frame's final
+    /// result, in frame order (the frames up to the initial one once the search has
+    /// gone back from it to the first; each frame a few frames behind the search
+    /// with the smoothed refit, which waits for its neighbours). Return
+    /// `ControlFlow::Break` to cancel. `total`, when known, is reported in
+    /// progress. When a frame cannot be read, the frames before it are reported
+    /// before the error is returned.
     pub fn track(
         &self,
         frames: impl Iterator<Item = anyhow::Result<FrameInput>>,
@@ -513,7 +563,7 @@ impl Tracker {
         }
         let ground = sole_height(&body, &body.posed(&init_pose));
         search.ground = ground;
-        let mut results: Vec<Option<TrackedFrame>> = vec![None; pending.len()];
+        let mut results: Vec<Option<TrackedFrame>> = vec![None; init + 1];
         let mut done = 0usize;
         let mut emit =
             |frame: TrackedFrame, done: &mut usize| -> Result<TrackedFrame, TrackError> {
@@ -530,41 +580,78 @@ impl Tracker {
                 }
             };
         let (cost, iou) = search.measure(init_target, &init_pose);
-        let first = TrackedFrame {
+        results[init] = Some(TrackedFrame {
             index: init,
             person: true,
             pose: init_pose,
             cost: Some(cost),
             iou: Some(iou),
             keyframe: init_key,
-        };
-        results[init] = Some(emit(first, &mut done)?);
+        });
         timing.search += t0.elapsed().as_secs_f64();
 
-        // Phase 3: backwards from the initial frame, then forwards over the buffer.
-        let t0 = Instant::now();
-        let mut history = History::new(init_pose);
-        for i in (0..init).rev() {
-            let f = search.step(i, pending[i].target.as_ref(), &mut history);
-            results[i] = Some(emit(f, &mut done)?);
-        }
-        let mut history = History::new(init_pose);
-        for (i, p) in pending.iter().enumerate().skip(init + 1) {
-            let f = search.step(i, p.target.as_ref(), &mut history);
-            results[i] = Some(emit(f, &mut done)?);
-        }
-        timing.search += t0.elapsed().as_secs_f64();
-        drop(pending);
+        // Phases 3 and 4 hand each tracked frame to the smoothed refit, which hands
+        // the frames back in order once their neighbours are known (at once when it
+        // is off); a frame is reported when it comes back.
+        let mut out: Vec<TrackedFrame> = Vec::new();
+        std::thread::scope(|scope| -> Result<(), TrackError> {
+            let mut refit = Refit::start(scope, self, &body, ground);
+            let mut take = |refit: &mut Refit, end: bool| -> Result<(), TrackError> {
+                for f in refit.finished(end) {
+                    out.push(emit(f, &mut done)?);
+                }
+                Ok(())
+            };
 
-        // Phase 4: stream the rest.
-        let mut out: Vec<TrackedFrame> = results.into_iter().map(|r| r.expect("tracked")).collect();
-        while let Some(next) = next_target(&mut prev_features, &mut timing) {
-            let (i, target, _) = next?;
-            let t0 = Instant::now();
-            let f = search.step(i, target.as_ref(), &mut history);
-            timing.search += t0.elapsed().as_secs_f64();
-            out.push(emit(f, &mut done)?);
-        }
+            // Phase 3: backwards from the initial frame, then forwards over the buffer.
+            let mut searched = 0.0;
+            let mut step = |i: usize, target: Option<&Target>, history: &mut History| {
+                let t0 = Instant::now();
+                let f = search.step(i, target, history);
+                searched += t0.elapsed().as_secs_f64();
+                f
+            };
+            let mut history = History::new(init_pose);
+            for i in (0..init).rev() {
+                results[i] = Some(step(i, pending[i].target.as_ref(), &mut history));
+            }
+            let mut targets: Vec<Option<Target>> = pending.into_iter().map(|p| p.target).collect();
+            for (i, (result, target)) in results.iter_mut().zip(&mut targets).enumerate() {
+                let mut target = target.take();
+                // A given initial pose is kept on its frame, as a keyframe's is.
+                if i == init && self.opts.initial.is_some() {
+                    target = None;
+                }
+                refit.push(result.take().expect("tracked"), target);
+            }
+            take(&mut refit, false)?;
+            let mut history = History::new(init_pose);
+            for (i, target) in targets.iter_mut().enumerate().skip(init + 1) {
+                let f = step(i, target.as_ref(), &mut history);
+                refit.push(f, target.take());
+                take(&mut refit, false)?;
+            }
+            drop(targets);
+
+            // Phase 4: stream the rest.
+            while let Some(next) = next_target(&mut prev_features, &mut timing) {
+                let (i, target, _) = match next {
+                    Ok(next) => next,
+                    Err(e) => {
+                        // The frames tracked before a bad one are reported first.
+                        take(&mut refit, true)?;
+                        return Err(e);
+                    }
+                };
+                let f = step(i, target.as_ref(), &mut history);
+                refit.push(f, target);
+                take(&mut refit, false)?;
+            }
+            take(&mut refit, true)?;
+            timing.search += searched + refit.here_secs;
+            timing.evals += refit.evals;
+            Ok(())
+        })?;
         if let Some(t) = total {
             if out.len() != t {
                 // The container's count was off; keyframes are checked against the truth.
@@ -784,6 +871,134 @@ fn init_score(f: &FrameFeatures) -> f64 {
     }
     // Among equals, a larger person (nearer, better resolved) wins slightly.
     s + 1e-4 * f.body_height
+}
+
+/// The smoothed refit's runner: the frames' [`Window`], and a helper thread that
+/// refits them when the tracker has two threads or more (the search's own thread
+/// otherwise). Frames come back in order.
+struct Refit<'a> {
+    window: Window<Target>,
+    run: RefitRun<'a>,
+    /// Frames refitted on the helper thread, in order, not yet collected.
+    back: Vec<TrackedFrame>,
+    /// Evaluations spent, and seconds spent on the search's own thread.
+    evals: u64,
+    here_secs: f64,
+}
+
+enum RefitRun<'a> {
+    Here(Box<Search<'a>>),
+    Helper {
+        jobs: Option<SyncSender<Job<Target>>>,
+        results: Receiver<(TrackedFrame, u64)>,
+        /// Jobs sent and not yet received.
+        out: usize,
+    },
+}
+
+impl<'a> Refit<'a> {
+    fn start<'scope>(
+        scope: &'scope std::thread::Scope<'scope, 'a>,
+        tracker: &'a Tracker,
+        body: &'a Body,
+        ground: f64,
+    ) -> Refit<'a> {
+        let window = Window::new(tracker.opts.refit_sigma);
+        let here = || RefitRun::Here(Box::new(Search::new(tracker, body, ground)));
+        let run = if tracker.threads() > 1 && tracker.opts.refit_sigma > 0.0 {
+            let (job_tx, job_rx) = sync_channel::<Job<Target>>(REFIT_QUEUE);
+            let (out_tx, out_rx) = channel();
+            let helper = std::thread::Builder::new()
+                .name("monocap-refit".into())
+                .spawn_scoped(scope, move || {
+                    let search = Search::new(tracker, body, ground);
+                    for job in job_rx {
+                        if out_tx.send(search.refit(job)).is_err() {
+                            break;
+                        }
+                    }
+                });
+            match helper {
+                Ok(_) => RefitRun::Helper {
+                    jobs: Some(job_tx),
+                    results: out_rx,
+                    out: 0,
+                },
+                // A thread the system cannot start: refit here.
+                Err(_) => here(),
+            }
+        } else {
+            here()
+        };
+        Refit {
+            window,
+            run,
+            back: Vec::new(),
+            evals: 0,
+            here_secs: 0.0,
+        }
+    }
+
+    /// Adds the next frame in index order (its target, None without a person).
+    fn push(&mut self, frame: TrackedFrame, target: Option<Target>) {
+        self.window.push(frame, target);
+    }
+
+    /// The frames refitted since the last call, in order: without waiting for the
+    /// helper unless `end` (no more frames will come: all of them).
+    fn finished(&mut self, end: bool) -> Vec<TrackedFrame> {
+        let mut done = Vec::new();
+        while let Some(job) = self.window.next(end) {
+            match &mut self.run {
+                RefitRun::Here(search) => {
+                    let t0 = Instant::now();
+                    let (f, evals) = search.refit(job);
+                    self.here_secs += t0.elapsed().as_secs_f64();
+                    self.evals += evals;
+                    done.push(f);
+                }
+                RefitRun::Helper { jobs, out, .. } => {
+                    // The helper ends only when its jobs are dropped, which is
+                    // after this: the send finds it.
+                    if let Some(tx) = jobs {
+                        tx.send(job).expect("the refit helper ended early");
+                        *out += 1;
+                    }
+                    self.collect(false);
+                }
+            }
+        }
+        if end {
+            if let RefitRun::Helper { jobs, .. } = &mut self.run {
+                *jobs = None;
+            }
+            self.collect(true);
+        } else {
+            self.collect(false);
+        }
+        done.append(&mut self.back);
+        done
+    }
+
+    /// Takes the helper's answers into `back`, waiting for all of them when `all`.
+    fn collect(&mut self, all: bool) {
+        let RefitRun::Helper { results, out, .. } = &mut self.run else {
+            return;
+        };
+        while *out > 0 {
+            let got = if all {
+                results.recv().ok()
+            } else {
+                results.try_recv().ok()
+            };
+            let Some((f, evals)) = got else {
+                break;
+            };
+            *out -= 1;
+            self.evals += evals;
+            self.back.push(f);
+        }
+    }
 }
 
 /// The previous solutions a frame's prediction is made from.
@@ -1007,6 +1222,46 @@ impl<'a> Search<'a> {
             iou: Some(iou),
             keyframe,
         }
+    }
+
+    /// One frame of the smoothed refit ([`super::refit`]): the search (its runs,
+    /// each parameter within its reach) from the job's start; its answer replaces
+    /// the frame's unless it is outside the limits. The frame, and the evaluations
+    /// spent.
+    fn refit(&self, job: Job<Target>) -> (TrackedFrame, u64) {
+        let Job {
+            frame,
+            target,
+            start,
+        } = job;
+        let (Some(target), Some(start)) = (target.as_ref(), start) else {
+            return (frame, 0);
+        };
+        let opts = &self.tracker.opts;
+        let mut ev = self.evaluator(target);
+        let mut best = start;
+        let mut best_f = ev.cost(&start);
+        let (lo, hi) = self.reach_box(&start, &[false; MOTION_COUNT]);
+        self.hierarchical(
+            &mut ev,
+            &mut best,
+            &mut best_f,
+            &lo,
+            &hi,
+            opts.refit_runs,
+            opts.evals_per_param,
+        );
+        if !best_f.is_finite() {
+            return (frame, ev.evals);
+        }
+        let iou = ev.iou(&best);
+        let refitted = TrackedFrame {
+            pose: best,
+            cost: Some(best_f),
+            iou: Some(iou),
+            ..frame
+        };
+        (refitted, ev.evals)
     }
 
     /// The joint polish ([`TrackOptions::polish_evals`]): CMA-ES over the parameters
