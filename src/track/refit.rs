@@ -18,7 +18,7 @@
 
 use std::collections::VecDeque;
 
-use super::tracker::TrackedFrame;
+use super::tracker::{TrackedFrame, MAX_REFIT_SIGMA};
 use crate::body::params::{clamp_to_limits, Pose, MOTION_COUNT};
 
 /// The neighbours averaged: up to this many standard deviations either side.
@@ -43,11 +43,14 @@ pub(crate) struct Window<T> {
 }
 
 impl<T> Window<T> {
-    /// A window averaging with a Gaussian of `sigma` frames; 0 (or less) for no
-    /// refit: frames then pass straight through.
+    /// A window averaging with a Gaussian of `sigma` frames (at most
+    /// [`MAX_REFIT_SIGMA`]); 0 (or less) for no refit: frames then pass straight
+    /// through.
     pub fn new(sigma: f64) -> Window<T> {
+        // Within the limit the options are checked against (a library caller's
+        // may not be), so that the window stays small.
         let sigma = if sigma.is_finite() {
-            sigma.max(0.0)
+            sigma.clamp(0.0, MAX_REFIT_SIGMA)
         } else {
             0.0
         };
@@ -181,6 +184,16 @@ mod tests {
                     j.frame.index
                 );
             }
+        }
+    }
+
+    #[test]
+    fn the_window_stays_within_the_widest_refit() {
+        let w: Window<()> = Window::new(1e12);
+        assert_eq!(w.radius, (REACH_SIGMAS * MAX_REFIT_SIGMA).ceil() as usize);
+        for odd in [f64::NAN, f64::INFINITY, -3.0] {
+            let w: Window<()> = Window::new(odd);
+            assert_eq!(w.radius, 0, "{odd}");
         }
     }
 
