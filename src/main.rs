@@ -165,6 +165,31 @@ impl WeightArgs {
     }
 }
 
+/// The smoothed refit's flags (`track` and `bench`).
+#[derive(Args)]
+struct RefitArgs {
+    /// The smoothed refit: each frame searched again from the Gaussian average of
+    /// its neighbours' poses, this many frames wide (0 for none); on a helper
+    /// thread behind the search when there are two threads or more.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
+    refit_sigma: f64,
+    /// Runs of the search in each frame's refit.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
+    refit_runs: usize,
+}
+
+impl RefitArgs {
+    /// The two flags, checked, into `track`.
+    fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
+        let (sigma, runs) = (self.refit_sigma, self.refit_runs);
+        monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
+            .map_err(anyhow::Error::msg)?;
+        track.refit_sigma = sigma;
+        track.refit_runs = runs;
+        Ok(())
+    }
+}
+
 #[derive(Args)]
 struct TrackArgs {
     /// MP4/AVI (H.264, MJPEG), Y4M, GIF/APNG/WebP, ZIP/TAR of frames or of masks.
@@ -192,14 +217,8 @@ struct TrackArgs {
     /// frames, a sixth to a quarter of the speed.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
-    /// The smoothed refit: each frame searched again from the Gaussian average of
-    /// its neighbours' poses, this many frames wide (0 for none); on a helper
-    /// thread behind the search when there are two threads or more.
-    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
-    refit_sigma: f64,
-    /// Runs of the search in each frame's refit.
-    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
-    refit_runs: usize,
+    #[command(flatten)]
+    refit: RefitArgs,
     /// Threads the tracker may use (0: one per core; 1: none beside the search).
     /// Features are computed ahead of the search and the initialisation's fits
     /// run side by side; the result is the same for any number.
@@ -248,14 +267,8 @@ struct BenchArgs {
     /// frame the group search and the jumps leave poorly fitted; 0 for none.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_evals)]
     polish_evals: usize,
-    /// The smoothed refit: each frame searched again from the Gaussian average of
-    /// its neighbours' poses, this many frames wide (0 for none); on a helper
-    /// thread behind the search when there are two threads or more.
-    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
-    refit_sigma: f64,
-    /// Runs of the search in each frame's refit.
-    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
-    refit_runs: usize,
+    #[command(flatten)]
+    refit: RefitArgs,
     /// Threads the tracker may use (0: one per core; 1: none beside the search).
     /// Features are computed ahead of the search and the initialisation's fits
     /// run side by side; the result is the same for any number.
@@ -606,19 +619,6 @@ fn check_polish_evals(n: usize) -> Result<()> {
     Ok(())
 }
 
-/// `--refit-sigma` and `--refit-runs`, checked, into `track`.
-fn set_refit(
-    track: &mut monocap::track::tracker::TrackOptions,
-    sigma: f64,
-    runs: usize,
-) -> Result<()> {
-    monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
-        .map_err(anyhow::Error::msg)?;
-    track.refit_sigma = sigma;
-    track.refit_runs = runs;
-    Ok(())
-}
-
 fn bench_command(a: BenchArgs) -> Result<()> {
     use monocap::track::bench::{self, BenchOptions};
     use monocap::track::metrics::Accumulator;
@@ -636,7 +636,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     opts.track.restarts = a.restarts;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
-    set_refit(&mut opts.track, a.refit_sigma, a.refit_runs)?;
+    a.refit.apply(&mut opts.track)?;
     opts.track.threads = check_threads(a.threads)?;
     if a.polish_iou.is_nan() || a.polish_iou < 0.0 {
         anyhow::bail!(
@@ -798,7 +798,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     opts.silhouettes.background.empty = parse_empty_frames(&a.empty_frames)?;
     opts.track.restarts = a.restarts;
     opts.track.polish_evals = a.polish_evals;
-    set_refit(&mut opts.track, a.refit_sigma, a.refit_runs)?;
+    a.refit.apply(&mut opts.track)?;
     opts.track.threads = check_threads(a.threads)?;
     opts.track.init_frame = a.init_frame;
     a.weights.apply(&mut opts.track.weights)?;
