@@ -309,6 +309,42 @@ impl Jump {
     }
 }
 
+/// The whole body mirrored in depth: reflected in the vertical plane through its
+/// root square to the line of sight from the camera (at the world's origin), left
+/// and right exchanged so that it is a body again. Seen by an orthographic camera
+/// it is the same silhouette; a pinhole camera sees it nearly so. The heading h
+/// becomes 2φ − h + 180° (φ: the heading that faces the camera), the roll and the
+/// trunk's and neck's sideways bends and twists change sign, the limbs' angles are
+/// exchanged; the root's position and the forward bends are kept.
+pub fn depth_mirror(pose: &Pose) -> Pose {
+    let facing = (-pose[ix::ROOT_TX]).atan2(-pose[ix::ROOT_TZ]).to_degrees();
+    let mut m = *pose;
+    let h = 2.0 * facing - pose[ix::ROOT_RY] + 180.0;
+    // The same heading within a turn of the original's, so that nothing unwinds.
+    m[ix::ROOT_RY] = h - 360.0 * ((h - pose[ix::ROOT_RY]) / 360.0).round();
+    for k in [
+        ix::ROOT_RZ,
+        ix::SPINE + 1,
+        ix::SPINE + 2,
+        ix::NECK + 1,
+        ix::NECK + 2,
+    ] {
+        m[k] = -pose[k];
+    }
+    let arm = ix::R_SHOULDER - ix::L_SHOULDER;
+    let leg = ix::R_HIP - ix::L_HIP;
+    m[ix::L_SHOULDER..ix::L_SHOULDER + arm]
+        .copy_from_slice(&pose[ix::R_SHOULDER..ix::R_SHOULDER + arm]);
+    m[ix::R_SHOULDER..ix::R_SHOULDER + arm]
+        .copy_from_slice(&pose[ix::L_SHOULDER..ix::L_SHOULDER + arm]);
+    m[ix::L_HIP..ix::L_HIP + leg].copy_from_slice(&pose[ix::R_HIP..ix::R_HIP + leg]);
+    m[ix::R_HIP..ix::R_HIP + leg].copy_from_slice(&pose[ix::L_HIP..ix::L_HIP + leg]);
+    for k in 0..crate::body::params::MOTION_COUNT {
+        m[k] = m[k].clamp(MOTION[k].lo, MOTION[k].hi);
+    }
+    m
+}
+
 /// `pose` with `params` fitted by inverse kinematics to the landmarks `target`,
 /// from each of `seeds` (values of `params`); the best fit.
 fn fit_landmarks<const N: usize>(
@@ -372,6 +408,51 @@ mod tests {
     use crate::body::params::{ix, rest_pose, STANDARD_SHAPE};
     use crate::body::skeleton::Posed;
     use crate::body::Camera;
+
+    #[test]
+    fn the_depth_mirror_is_the_reflected_body_with_left_and_right_exchanged() {
+        use crate::body::params::MOTION_COUNT;
+        use rand::{RngExt, SeedableRng};
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let pair = |j: Joint| -> Joint {
+            let n = format!("{j:?}");
+            let other = if let Some(r) = n.strip_prefix("Left") {
+                format!("Right{r}")
+            } else if let Some(r) = n.strip_prefix("Right") {
+                format!("Left{r}")
+            } else {
+                n
+            };
+            Joint::ALL
+                .into_iter()
+                .find(|k| format!("{k:?}") == other)
+                .unwrap()
+        };
+        for _ in 0..50 {
+            let mut pose = [0.0; MOTION_COUNT];
+            for (k, v) in pose.iter_mut().enumerate() {
+                let (lo, hi) = (MOTION[k].lo.max(-170.0), MOTION[k].hi.min(170.0));
+                *v = rng.random_range(lo..hi);
+            }
+            pose[ix::ROOT_TX] = rng.random_range(-150.0..150.0);
+            pose[ix::ROOT_TY] = rng.random_range(-50.0..50.0);
+            pose[ix::ROOT_TZ] = rng.random_range(-600.0..-200.0);
+            let mirrored = depth_mirror(&pose);
+            let (a, b) = (body.posed(&pose), body.posed(&mirrored));
+            let root = a.joint(Joint::Hips).coords;
+            let n = nalgebra::Vector3::new(root.x, 0.0, root.z).normalize();
+            for j in Joint::ALL {
+                let p = a.joint(j).coords - root;
+                let reflected = p - 2.0 * p.dot(&n) * n;
+                let got = b.joint(pair(j)).coords - root;
+                assert!(
+                    (got - reflected).norm() < 1e-6,
+                    "{j:?}: {got} vs {reflected}"
+                );
+            }
+        }
+    }
 
     fn flip(name: &str) -> &'static Flip {
         FLIPS.iter().find(|f| f.name == name).unwrap()
