@@ -1,12 +1,15 @@
-//! Do the colour frame's inner outlines tell a pose from the poses the silhouette
-//! confuses it with? For every benchmark capture and azimuth (colour clips as
-//! `monocap bench` renders them), each frame's true shape and pose is compared with
-//! the same pose after each jump the tracker tries (the depth flips, the nod moved
-//! into the trunk, the legs and the arms swapped left for right) by
+//! Do the colour frame's inner outlines, and its shading, tell a pose from the
+//! poses the silhouette confuses it with? For every benchmark capture and azimuth
+//! (colour clips as `monocap bench` renders them), each frame's true shape and pose
+//! is compared with the same pose after each jump the tracker tries (the depth
+//! flips, the nod moved into the trunk, the legs and the arms swapped left for
+//! right) and with the whole body's depth mirror
+//! ([`monocap::track::flips::depth_mirror`]), by
 //! [`monocap::track::outlines::Outlines::disagreement`] on the frame's edges (the
-//! true silhouette, so that only the outlines are measured). Prints, per jump, on
-//! how many frames the truth disagrees less (by more than 3 pixels), more, or about
-//! as much.
+//! true silhouette, so that only the outlines are measured) and by
+//! [`monocap::track::shading::Shading::misfit`] on its brightness. Prints, per
+//! jump, on how many frames the truth disagrees less (by more than 3 pixels, or 2
+//! levels² of mean shading misfit), more, or about as much, and the mean misfits.
 //!
 //! ```text
 //! cargo run --release --example outline_probe [--mocap ../shared/data/mocap]
@@ -22,13 +25,27 @@ use monocap::body::{Body, Camera};
 use monocap::clip::write::Frame;
 use monocap::motion::bvh::Bvh;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
-use monocap::track::flips::Jump;
+use monocap::track::flips::{depth_mirror, Jump};
 use monocap::track::objective::{Target, Weights};
 use monocap::track::outlines::Outlines;
+use monocap::track::shading::Shading;
 use monocap::vision::features::{compute, FeatureOptions};
 
 /// Differences up to this many pixels count as a tie.
 const TIE: f64 = 3.0;
+/// Differences of mean shading misfit up to this many levels² count as a tie.
+const SHADE_TIE: f64 = 2.0;
+
+/// Where `d` lies against the truth's `d_true`: 0 the truth less, 1 more, 2 a tie.
+fn slot(d: f64, d_true: f64, tie: f64) -> usize {
+    if d > d_true + tie {
+        0
+    } else if d < d_true - tie {
+        1
+    } else {
+        2
+    }
+}
 
 fn jump_name(j: Jump) -> String {
     match j {
@@ -56,6 +73,9 @@ fn main() -> Result<()> {
     files.sort();
     // Per jump: frames where the truth disagrees less, more, about as much.
     let mut tally: BTreeMap<String, [u32; 3]> = BTreeMap::new();
+    // Per jump: the same by the shading; and the sums of the truth's and the
+    // jump's mean misfits.
+    let mut shade_tally: BTreeMap<String, ([u32; 3], f64, f64)> = BTreeMap::new();
     for file in &files {
         let bvh = Bvh::read(file)?;
         let name = file.file_name().unwrap_or_default().to_string_lossy();
@@ -81,6 +101,7 @@ fn main() -> Result<()> {
             shape.copy_from_slice(&truth.shape.values);
             let body = Body::new(&shape);
             let mut outlines = Outlines::new(&cam);
+            let mut shading = Shading::new(&cam);
             let mut clip: BTreeMap<String, [u32; 3]> = BTreeMap::new();
             for tf in &truth.frames {
                 let (Some(picture), Some(mask)) = (pictures.get(tf.index), masks.get(tf.index))
@@ -94,21 +115,24 @@ fn main() -> Result<()> {
                 let Some(d_true) = outlines.disagreement(&body, &cam, &target, &pose) else {
                     continue;
                 };
-                for jump in Jump::all() {
-                    let Some(other) = jump.apply(&body, &pose) else {
-                        continue;
-                    };
+                let luma: Vec<u8> = picture
+                    .pixels()
+                    .map(|p| ((u16::from(p[0]) + u16::from(p[1]) + u16::from(p[2]) + 1) / 3) as u8)
+                    .collect();
+                let (s_true, _) = shading.misfit(&body, &cam, &luma, mask, &pose);
+                let others = Jump::all()
+                    .filter_map(|jump| jump.apply(&body, &pose).map(|p| (jump_name(jump), p)))
+                    .chain([("depth_mirror".to_string(), depth_mirror(&pose))]);
+                for (name, other) in others {
                     let Some(d) = outlines.disagreement(&body, &cam, &target, &other) else {
                         continue;
                     };
-                    let slot = if d > d_true + TIE {
-                        0
-                    } else if d < d_true - TIE {
-                        1
-                    } else {
-                        2
-                    };
-                    clip.entry(jump_name(jump)).or_default()[slot] += 1;
+                    clip.entry(name.clone()).or_default()[slot(d, d_true, TIE)] += 1;
+                    let (s, _) = shading.misfit(&body, &cam, &luma, mask, &other);
+                    let e = shade_tally.entry(name).or_default();
+                    e.0[slot(s, s_true, SHADE_TIE)] += 1;
+                    e.1 += s_true;
+                    e.2 += s;
                 }
             }
             let swaps: Vec<String> = ["legs_swapped", "arms_swapped"]
@@ -128,8 +152,24 @@ fn main() -> Result<()> {
         }
     }
     println!("\njump: frames where the truth disagrees less / more / about as much");
+    println!(
+        "{:24} {:>17}   {:>17}   mean shading misfit (levels²)",
+        "", "outlines", "shading"
+    );
     for (k, t) in &tally {
-        println!("{k:24} {:5} {:5} {:5}", t[0], t[1], t[2]);
+        let (s, s_true, s_jump) = shade_tally.get(k).copied().unwrap_or_default();
+        let n = f64::from(s[0] + s[1] + s[2]).max(1.0);
+        println!(
+            "{k:24} {:5} {:5} {:5}   {:5} {:5} {:5}   truth {:6.1}, jump {:6.1}",
+            t[0],
+            t[1],
+            t[2],
+            s[0],
+            s[1],
+            s[2],
+            s_true / n,
+            s_jump / n
+        );
     }
     Ok(())
 }

@@ -9,5 +9,6 @@ pub mod outlines;
 mod prefetch;
 mod refit;
 pub mod run;
+pub mod shading;
 pub mod simplex;
 pub mod tracker;
