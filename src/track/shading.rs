@@ -9,10 +9,21 @@
 
 use nalgebra::{Matrix4, Vector4};
 
+use crate::body::parts::Material;
 use crate::body::raster::{render_fragments, Fragments};
 use crate::body::{Body, Camera, Mask, Pose};
 
+/// The materials, each fitted on its own.
 const MATERIALS: usize = 4;
+
+fn material_index(m: Material) -> usize {
+    match m {
+        Material::Skin => 0,
+        Material::Shirt => 1,
+        Material::Trousers => 2,
+        Material::Shoes => 3,
+    }
+}
 
 /// Buffers for [`Shading::misfit`].
 pub struct Shading {
@@ -28,7 +39,9 @@ impl Shading {
 
     /// The mean squared brightness misfit (8-bit levels²) over the pixels inside
     /// `person` where `pose` shows one material with the same material all around,
-    /// and the number of those pixels.
+    /// and the number of those pixels. `luma` is the frame's brightness, row-major;
+    /// with a `luma` or `person` of another size than the camera's image there is
+    /// nothing to compare: (0, 0).
     pub fn misfit(
         &mut self,
         body: &Body,
@@ -37,14 +50,20 @@ impl Shading {
         person: &Mask,
         pose: &Pose,
     ) -> (f64, u64) {
+        let (w, h) = (cam.width as usize, cam.height as usize);
+        if luma.len() != w * h || person.width() != cam.width || person.height() != cam.height {
+            return (0.0, 0);
+        }
+        if self.fragments.width != cam.width || self.fragments.height != cam.height {
+            self.fragments = Fragments::new(cam.width, cam.height);
+        }
         let fr = &mut self.fragments;
         render_fragments(body, &body.posed(pose), cam, fr);
-        let (w, h) = (cam.width as usize, cam.height as usize);
         let mut xtx = [Matrix4::<f64>::zeros(); MATERIALS];
         let mut xty = [Vector4::<f64>::zeros(); MATERIALS];
         let mut yty = [0.0f64; MATERIALS];
         let mut count = [0u64; MATERIALS];
-        let material = |k: usize| body.parts[fr.part[k] as usize].material as usize;
+        let material = |k: usize| material_index(body.parts[fr.part[k] as usize].material);
         for y in 1..h.saturating_sub(1) {
             for x in 1..w.saturating_sub(1) {
                 let i = y * w + x;
@@ -149,5 +168,10 @@ mod tests {
         // a little misfit.
         assert!(right < 16.0, "the pose itself misfits by {right}");
         assert!(wrong > 2.0 * right, "{right} vs {wrong}");
+        // A picture of another size has nothing to compare.
+        assert_eq!(
+            s.misfit(&body, &cam, &luma[..100], &person, &pose),
+            (0.0, 0)
+        );
     }
 }
