@@ -22,7 +22,7 @@
 use nalgebra::Point3;
 
 use super::simplex::{minimize, SimplexOptions};
-use crate::body::params::{ix, Group, Pose, MOTION};
+use crate::body::params::{clamp_to_limits, ix, Group, Pose, MOTION};
 use crate::body::skeleton::{joints_moved_by, Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
 use crate::body::Body;
 
@@ -268,10 +268,16 @@ fn swapped(pose: &Pose, left: usize, right: usize, n: usize) -> Option<Pose> {
     let apart = (0..n).any(|k| (pose[left + k] - pose[right + k]).abs() >= 1.0);
     apart.then(|| {
         let mut p = *pose;
-        p[left..left + n].copy_from_slice(&pose[right..right + n]);
-        p[right..right + n].copy_from_slice(&pose[left..left + n]);
+        exchange(&mut p, left, right, n);
         p
     })
+}
+
+/// Exchanges the `n` values from `left` with the `n` from `right`.
+fn exchange(pose: &mut Pose, left: usize, right: usize, n: usize) {
+    for k in 0..n {
+        pose.swap(left + k, right + k);
+    }
 }
 
 impl Jump {
@@ -331,17 +337,14 @@ pub fn depth_mirror(pose: &Pose) -> Pose {
     ] {
         m[k] = -pose[k];
     }
-    let arm = ix::R_SHOULDER - ix::L_SHOULDER;
-    let leg = ix::R_HIP - ix::L_HIP;
-    m[ix::L_SHOULDER..ix::L_SHOULDER + arm]
-        .copy_from_slice(&pose[ix::R_SHOULDER..ix::R_SHOULDER + arm]);
-    m[ix::R_SHOULDER..ix::R_SHOULDER + arm]
-        .copy_from_slice(&pose[ix::L_SHOULDER..ix::L_SHOULDER + arm]);
-    m[ix::L_HIP..ix::L_HIP + leg].copy_from_slice(&pose[ix::R_HIP..ix::R_HIP + leg]);
-    m[ix::R_HIP..ix::R_HIP + leg].copy_from_slice(&pose[ix::L_HIP..ix::L_HIP + leg]);
-    for k in 0..crate::body::params::MOTION_COUNT {
-        m[k] = m[k].clamp(MOTION[k].lo, MOTION[k].hi);
-    }
+    exchange(
+        &mut m,
+        ix::L_SHOULDER,
+        ix::R_SHOULDER,
+        ix::R_SHOULDER - ix::L_SHOULDER,
+    );
+    exchange(&mut m, ix::L_HIP, ix::R_HIP, ix::R_HIP - ix::L_HIP);
+    clamp_to_limits(&mut m);
     m
 }
 

@@ -130,8 +130,8 @@ mod tests {
                     + f64::from(n[1]) * light.y
                     + f64::from(n[2]) * light.z)
                     .max(0.0);
-                let albedo =
-                    [230.0, 120.0, 90.0, 50.0][body.parts[fr.part[i] as usize].material as usize];
+                let albedo = [230.0, 120.0, 90.0, 50.0]
+                    [material_index(body.parts[fr.part[i] as usize].material)];
                 (albedo * (0.25 + 0.75 * lambert)).round() as u8
             })
             .collect();
