@@ -140,6 +140,10 @@ struct WeightArgs {
     /// (a depth flip, the legs or arms swapped left for right); 0 for never
     #[arg(long, default_value_t = monocap::track::objective::OUTLINE_WEIGHT)]
     w_outline: f64,
+    /// Reward per pixel of skin colour (learned on the initial frame) that the
+    /// model's bare parts cover (forearms, hands, neck, head); 0 for none
+    #[arg(long, default_value_t = 0.0)]
+    w_skin: f64,
 }
 
 impl WeightArgs {
@@ -150,10 +154,15 @@ impl WeightArgs {
             ("--w-region", self.w_region),
             ("--reward-rim", self.reward_rim),
             ("--w-outline", self.w_outline),
+            ("--w-skin", self.w_skin),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
             }
+        }
+        let max = monocap::track::objective::MAX_SKIN_WEIGHT;
+        if self.w_skin > max {
+            anyhow::bail!("--w-skin {}: expected at most {max}", self.w_skin);
         }
         w.edge = self.w_edge;
         w.extremity = self.w_extremity;
@@ -161,6 +170,7 @@ impl WeightArgs {
         w.reward_rim = self.reward_rim;
         w.track_rewards = self.track_rewards;
         w.outline = self.w_outline;
+        w.skin = self.w_skin;
         Ok(())
     }
 }

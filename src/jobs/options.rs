@@ -45,6 +45,10 @@ pub struct JobOptions {
     /// see `Weights::outline`; 0 for never).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_outline: Option<f64>,
+    /// Reward per pixel of skin colour the model's bare parts cover (default 0,
+    /// see `Weights::skin`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_skin: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -149,6 +153,7 @@ impl JobOptions {
             ("w_core", self.w_core, &mut o.track.features.core_weight),
             ("reward_rim", self.reward_rim, &mut w.reward_rim),
             ("w_outline", self.w_outline, &mut w.outline),
+            ("w_skin", self.w_skin, &mut w.skin),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {
@@ -156,6 +161,13 @@ impl JobOptions {
                 }
                 *slot = v;
             }
+        }
+        let max = crate::track::objective::MAX_SKIN_WEIGHT;
+        if o.track.weights.skin > max {
+            return Err(format!(
+                "w_skin {}: expected at most {max}",
+                o.track.weights.skin
+            ));
         }
         if let Some(t) = self.track_rewards {
             o.track.weights.track_rewards = t;

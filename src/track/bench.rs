@@ -30,8 +30,9 @@ use crate::clip::write::Frame;
 use crate::motion::bvh::Bvh;
 use crate::motion::retarget::JointMap;
 use crate::synth::{synthesize_with, Style, SynthOptions, Truth};
-use crate::vision::features::compute;
+use crate::vision::features::{compute, FeatureOptions};
 use crate::vision::silhouette::{Segmenter, SilhouetteOptions};
+use crate::vision::skin::SkinModel;
 
 /// The joints compared.
 pub const JOINTS: [Joint; 14] = [
@@ -312,7 +313,14 @@ pub fn run_clip(
         joint_error_mm: [0.0; JOINTS.len()],
         frames: Vec::new(),
     };
-    let truth_costs = truth_costs(&kept_silhouettes, &kept_frames, &truth, &camera, opts);
+    let truth_costs = truth_costs(
+        &kept_silhouettes,
+        &kept_frames,
+        &truth,
+        &camera,
+        track.skin.as_ref(),
+        opts,
+    );
     drop((kept_silhouettes, kept_frames));
     for tf in &truth.frames {
         let f = &track.frames[tf.index];
@@ -381,22 +389,30 @@ fn mask_height(m: &Mask) -> f64 {
 
 /// The objective at the true shape and pose on every frame (+∞ before the person
 /// appears), with the features the tracker computes from the same silhouettes and
-/// images.
+/// images (and the skin colour it learned).
 fn truth_costs(
     silhouettes: &[Mask],
     images: &[RgbImage],
     truth: &Truth,
     camera: &Camera,
+    skin: Option<&SkinModel>,
     opts: &BenchOptions,
 ) -> Vec<f64> {
     let body = Body::new(&true_shape(truth));
     let mut out = vec![f64::INFINITY; silhouettes.len()];
     let mut prev = None;
     let mut at = truth.frames.iter().peekable();
+    let features = FeatureOptions {
+        colours: skin.is_some(),
+        ..opts.track.features.clone()
+    };
     for (i, (s, img)) in silhouettes.iter().zip(images).enumerate() {
-        let f = compute(s, Some(img), prev.as_ref(), &opts.track.features);
+        let f = compute(s, Some(img), prev.as_ref(), &features);
         if let Some(tf) = at.next_if(|tf| tf.index == i) {
-            let target = Target::new(&f, &opts.track.weights);
+            let mut target = Target::new(&f, &opts.track.weights);
+            if let Some(m) = skin {
+                target.add_skin(m, opts.track.weights.skin);
+            }
             let mut pose = [0.0; MOTION_COUNT];
             pose.copy_from_slice(&tf.params);
             out[i] = Evaluator::new(&body, camera, &target, opts.track.weights, None).cost(&pose);

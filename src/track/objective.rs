@@ -1,7 +1,8 @@
 //! The objective F(β) of method.md §4 (paper §4.2–4.3): how badly the model in pose β
 //! explains one frame's silhouette.
 //!
-//! F = c + e + a + l, or +∞ outside the joint limits or below the ground (Eq. 7):
+//! F = c + e + a + l (+ s, the optional skin reward, [`Weights::skin`]), or +∞
+//! outside the joint limits or below the ground (Eq. 7):
 //!
 //! - c (Eq. 3), the core-weighted XOR: Σ over pixels where exactly one of the input
 //!   silhouette S and the model silhouette M is set, of the coremap d;
@@ -21,11 +22,17 @@
 
 use super::outlines::FrameEdges;
 use crate::body::params::{within_limits, Pose};
-use crate::body::raster::{render_parts, Mask};
+use crate::body::parts::Material;
+use crate::body::raster::{render_fragments, render_parts, Fragments, Mask};
 use crate::body::skeleton::{joints_moved_by, Joint, Posed, Tip, JOINT_COUNT};
 use crate::body::{Body, Camera, PART_COUNT};
 use crate::vision::features::{ExtremityKind, FrameFeatures};
+use crate::vision::skin::SkinModel;
 use nalgebra::Point3;
+use std::sync::Arc;
+
+/// The largest [`Weights::skin`].
+pub const MAX_SKIN_WEIGHT: f64 = 1000.0;
 
 /// Default of [`Weights::outline`].
 pub const OUTLINE_WEIGHT: f64 = 8.0;
@@ -60,6 +67,13 @@ pub struct Weights {
     /// and 0.810 → 0.848 without, PA-MPJPE 138.0 → 129.7 and 133.9 → 125.7 mm
     /// (README, "The colour frame's inner outlines").
     pub outline: f64,
+    /// The skin reward ([`crate::vision::skin`]): each pixel the model's bare parts
+    /// (forearms, hands, neck, head) cover earns this × (2p − 1) where its colour
+    /// is skin with a probability p above ½; it says where a forearm in front of
+    /// the body is, which the silhouette cannot. 0 for never (the default; at most
+    /// [`MAX_SKIN_WEIGHT`]); it applies once the tracker has learned the clip's
+    /// skin colour ([`Target::add_skin`]).
+    pub skin: f64,
 }
 
 impl Default for Weights {
@@ -71,6 +85,7 @@ impl Default for Weights {
             reward_rim: 0.0,
             track_rewards: false,
             outline: OUTLINE_WEIGHT,
+            skin: 0.0,
         }
     }
 }
@@ -113,6 +128,11 @@ pub struct Target {
     /// The colour frame's edges, for telling poses with the same silhouette apart
     /// ([`super::outlines`]); None without a colour frame.
     pub edges: Option<FrameEdges>,
+    /// The colour bin of each of the person's pixels (None without a colour frame).
+    colours: Option<Arc<Vec<u16>>>,
+    /// What a bare part covering each pixel adds (≤ 0); empty until
+    /// [`Target::add_skin`].
+    skin_gain: Vec<f32>,
 }
 
 impl Target {
@@ -184,7 +204,33 @@ impl Target {
             body_height: f.body_height,
             withheld,
             edges: f.colour_edges.then(|| FrameEdges::new(&f.edges, s)),
+            colours: f.colours.clone(),
+            skin_gain: Vec::new(),
         }
+    }
+
+    /// The colour bins of the person's pixels, when the frame had colour.
+    pub fn colours(&self) -> Option<&[u16]> {
+        self.colours.as_deref().map(|v| v.as_slice())
+    }
+
+    /// Rewards the model's bare parts for covering pixels of skin colour: −`weight`
+    /// (at most [`MAX_SKIN_WEIGHT`]) × (2p − 1) where the skin model gives a
+    /// probability p above ½. Nothing without a colour frame or with a weight of 0.
+    /// The colours are let go: they are needed no more.
+    pub fn add_skin(&mut self, model: &SkinModel, weight: f64) {
+        // (NaN is not above 0 either.)
+        if weight.is_nan() || weight <= 0.0 {
+            return;
+        }
+        let Some(colours) = self.colours.take() else {
+            return;
+        };
+        let weight = weight.min(MAX_SKIN_WEIGHT);
+        self.skin_gain = colours
+            .iter()
+            .map(|&b| -(weight as f32) * (2.0 * model.p(b) - 1.0).max(0.0))
+            .collect();
     }
 
     /// The same frame under the paper's objective (the initialisation's), the
@@ -208,6 +254,43 @@ impl Target {
     }
 }
 
+/// The clip's skin colour, learned from one fitted frame: the pixels of the person
+/// the model's bare parts are nearest the camera on are skin, those its clothed
+/// parts are the rest; pixels with a 4-neighbour of the other kind or off the
+/// model, and the image's border, are left out (the fit's outlines are not exact). None without a colour frame or
+/// with too few pixels of either kind.
+pub fn learn_skin(body: &Body, cam: &Camera, target: &Target, pose: &Pose) -> Option<SkinModel> {
+    let colours = target.colours()?;
+    let (w, h) = (cam.width, cam.height);
+    let mut frags = Fragments::new(w, h);
+    render_fragments(body, &body.posed(pose), cam, &mut frags);
+    let (mut skin, mut other) = (Mask::new(w, h), Mask::new(w, h));
+    let label = |x: u32, y: u32| {
+        let i = (y * w + x) as usize;
+        frags.depth[i]
+            .is_finite()
+            .then(|| is_bare(body, frags.part[i] as usize))
+    };
+    for y in 1..h.saturating_sub(1) {
+        for x in 1..w.saturating_sub(1) {
+            let Some(bare) = label(x, y) else {
+                continue;
+            };
+            let same = [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)]
+                .iter()
+                .all(|&(a, b)| label(a, b) == Some(bare));
+            if same {
+                if bare {
+                    skin.set(x, y, true);
+                } else {
+                    other.set(x, y, true);
+                }
+            }
+        }
+    }
+    SkinModel::learn(colours, &skin, &other, MIN_SKIN_PIXELS)
+}
+
 /// The terms of F at one pose (for reports and tests; [`Evaluator::cost`] is the
 /// fast path).
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
@@ -220,8 +303,13 @@ pub struct Terms {
     pub region: f64,
     /// l (Eq. 5), ≥ 0.
     pub extremity: f64,
+    /// The skin reward ([`Weights::skin`]), ≤ 0.
+    pub skin: f64,
     pub total: f64,
 }
+
+/// Pixels of each kind (skin, the rest) a skin colour model needs to be learned.
+const MIN_SKIN_PIXELS: u64 = 20;
 
 /// Ground constraint: the soles may sink at most this far (cm) below the ground.
 const GROUND_SLACK: f64 = 4.0;
@@ -237,6 +325,8 @@ pub struct Evaluator<'a> {
     /// The whole model (G) and its arms and legs (the region term).
     all: Layer,
     limbs: Layer,
+    /// The bare parts (the skin term), when the target has one.
+    skin: Option<Layer>,
     posed: Posed,
     /// While focused ([`Evaluator::focus`]): the joints the focused parameters move
     /// (the others are copied from `base`, the focused pose posed in full).
@@ -267,6 +357,8 @@ impl<'a> Evaluator<'a> {
             ground,
             all: Layer::new(cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect()),
             limbs: Layer::new(cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect()),
+            skin: (!target.skin_gain.is_empty())
+                .then(|| Layer::new(cam, (0..PART_COUNT).filter(|&i| is_bare(body, i)).collect())),
             posed: Posed::default(),
             moved: None,
             base: Posed::default(),
@@ -303,6 +395,18 @@ impl<'a> Evaluator<'a> {
             &fixed_limbs,
             &self.target.limb_gain,
         );
+        if let Some(skin) = &mut self.skin {
+            let body = self.body;
+            skin.moving = (0..PART_COUNT)
+                .filter(|&i| moving(i) && is_bare(body, i))
+                .collect();
+            let fixed: Vec<usize> = fixed_all
+                .iter()
+                .copied()
+                .filter(|&i| is_bare(body, i))
+                .collect();
+            skin.fix(body, &self.base, self.cam, &fixed, &self.target.skin_gain);
+        }
     }
 
     /// Every part moves again.
@@ -310,6 +414,10 @@ impl<'a> Evaluator<'a> {
         self.moved = None;
         self.all.unfix((0..PART_COUNT).filter(|&i| !is_limb(i)));
         self.limbs.unfix((0..PART_COUNT).filter(|&i| is_limb(i)));
+        let body = self.body;
+        if let Some(skin) = &mut self.skin {
+            skin.unfix((0..PART_COUNT).filter(|&i| is_bare(body, i)));
+        }
     }
 
     /// F(β) (+∞ when a constraint is violated).
@@ -329,6 +437,27 @@ impl<'a> Evaluator<'a> {
             return f64::INFINITY;
         }
         let mut total = self.target.base + self.all.fixed_sum + self.limbs.fixed_sum;
+        if let Some(skin) = &mut self.skin {
+            total += skin.fixed_sum;
+            skin.clear();
+            let rows = render_parts(
+                self.body,
+                &self.posed,
+                self.cam,
+                &skin.moving,
+                &mut skin.scratch,
+            );
+            if let Some((y0, y1)) = rows {
+                total += sum_over(
+                    &self.target.skin_gain,
+                    &skin.scratch,
+                    Some(&skin.fixed),
+                    y0,
+                    y1,
+                );
+            }
+            skin.drawn = rows;
+        }
         // The moving limbs first, on their own layer; then the rest of the moving
         // parts, and the limbs' pixels, on the whole model's layer.
         self.limbs.clear();
@@ -415,9 +544,21 @@ impl<'a> Evaluator<'a> {
             }
         }
         t.extremity = self.weights.extremity * self.end_distances();
+        if !self.target.skin_gain.is_empty() {
+            let bare: Vec<usize> = (0..PART_COUNT).filter(|&i| is_bare(self.body, i)).collect();
+            let mut skin = Mask::new(self.cam.width, self.cam.height);
+            render_parts(self.body, &self.posed, self.cam, &bare, &mut skin);
+            for y in 0..self.cam.height {
+                for x in 0..self.cam.width {
+                    if skin.get(x, y) {
+                        t.skin += self.target.skin_gain[(y * self.cam.width + x) as usize] as f64;
+                    }
+                }
+            }
+        }
         let ok = within_limits(pose) && !self.below_ground();
         t.total = if ok {
-            t.xor + t.edge + t.region + t.extremity
+            t.xor + t.edge + t.region + t.extremity + t.skin
         } else {
             f64::INFINITY
         };
@@ -526,6 +667,11 @@ impl Layer {
 /// Eq. 6: the arm and leg regions are where the model's limbs should be).
 fn is_limb(i: usize) -> bool {
     i >= crate::body::parts::TRUNK_PARTS
+}
+
+/// Whether part `i` is bare skin (the parts the skin term rewards).
+fn is_bare(body: &Body, i: usize) -> bool {
+    body.parts[i].material == Material::Skin
 }
 
 fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {
@@ -648,6 +794,85 @@ mod tests {
             (focused - full).abs() < 1e-6 * full.abs(),
             "{focused} vs {full}"
         );
+    }
+
+    #[test]
+    fn the_skin_term_rewards_bare_parts_on_skin_coloured_pixels() {
+        let (body, cam, pose) = scene();
+        let posed = body.posed(&pose);
+        let mut m = Mask::new(cam.width, cam.height);
+        crate::body::raster::render_mask(&body, &posed, &cam, &mut m);
+        // A colour frame: skin where the nearest part is bare, a blue shirt elsewhere
+        // on the body, a grey room behind.
+        let mut frags = Fragments::new(cam.width, cam.height);
+        render_fragments(&body, &posed, &cam, &mut frags);
+        let frame = image::RgbImage::from_fn(cam.width, cam.height, |x, y| {
+            let i = (y * cam.width + x) as usize;
+            image::Rgb(if !frags.depth[i].is_finite() {
+                [150, 150, 150]
+            } else if is_bare(&body, frags.part[i] as usize) {
+                [210, 165, 135]
+            } else {
+                [50, 95, 170]
+            })
+        });
+        let kept = FeatureOptions {
+            colours: true,
+            ..FeatureOptions::default()
+        };
+        // Colours are kept only when asked for.
+        let f = compute(&m, Some(&frame), None, &FeatureOptions::default());
+        assert!(f.colours.is_none());
+        let f = compute(&m, Some(&frame), None, &kept);
+        // The paper's weights, whose terms() are the fast cost's.
+        let w = Weights {
+            skin: 4.0,
+            ..Weights::paper()
+        };
+        let mut target = Target::new(&f, &w);
+        let model = learn_skin(&body, &cam, &target, &pose).expect("skin and shirt seen");
+        assert!(
+            model.learned.0 > 100 && model.learned.1 > 1000,
+            "{:?}",
+            model.learned
+        );
+        let plain = Evaluator::new(&body, &cam, &target, w, None).cost(&pose);
+        target.add_skin(&model, w.skin);
+        let mut ev = Evaluator::new(&body, &cam, &target, w, None);
+        // The reward: 4 per skin pixel the bare parts cover.
+        let skin_pixels = (0..frags.depth.len())
+            .filter(|&i| frags.depth[i].is_finite() && is_bare(&body, frags.part[i] as usize))
+            .count() as f64;
+        let at_truth = ev.terms(&pose, &f);
+        assert!(
+            (at_truth.skin + 4.0 * skin_pixels).abs() < 0.02 * 4.0 * skin_pixels,
+            "{} for {skin_pixels} skin pixels",
+            at_truth.skin
+        );
+        // The fast path agrees, whole or focused on the arm.
+        let mut bent = pose;
+        bent[ix::L_ELBOW] = 100.0;
+        for p in [pose, bent] {
+            let fast = ev.cost(&p);
+            let slow = ev.terms(&p, &f).total;
+            assert!(
+                (fast - slow).abs() < 1e-3 * slow.abs().max(1.0),
+                "{fast} vs {slow}"
+            );
+        }
+        assert!((ev.cost(&pose) - (plain + at_truth.skin)).abs() < 1e-3 * plain.abs());
+        let arm: Vec<usize> = (ix::L_SHOULDER..ix::L_SHOULDER + 4).collect();
+        ev.focus(&pose, &arm);
+        let focused = ev.cost(&bent);
+        ev.unfocus();
+        assert!((focused - ev.cost(&bent)).abs() < 1e-6 * focused.abs());
+        // The forearm bent off its skin pixels earns less.
+        assert!(ev.terms(&bent, &f).skin > at_truth.skin + 4.0 * 20.0);
+        // Without a colour frame there is nothing to learn from or to reward.
+        let mut grey = Target::new(&compute(&m, None, None, &kept), &w);
+        assert!(learn_skin(&body, &cam, &grey, &pose).is_none());
+        grey.add_skin(&model, w.skin);
+        assert!(grey.skin_gain.is_empty());
     }
 
     #[test]

@@ -37,7 +37,7 @@ use image::RgbImage;
 
 use super::flips::Jump;
 use super::keyframes::{KeyframeError, Keyframes};
-use super::objective::{sole_height, Evaluator, Target, Weights};
+use super::objective::{learn_skin, sole_height, Evaluator, Target, Weights};
 use super::outlines::Outlines;
 pub use super::prefetch::MAX_THREADS;
 use super::prefetch::{default_threads, par_map, Prefetch};
@@ -50,6 +50,7 @@ use crate::body::params::{
 use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
 use crate::vision::features::{link, FeatureOptions, FrameFeatures};
+use crate::vision::skin::SkinModel;
 
 /// A silhouette lower than this many pixels is not a person (noise, a speck).
 const MIN_PERSON_HEIGHT: f64 = 8.0;
@@ -329,6 +330,10 @@ pub struct Track {
     pub init_frame: usize,
     /// World y of the ground found at initialisation.
     pub ground: f64,
+    /// The clip's skin colour, learned on the initial frame (None unless the skin
+    /// term is weighed, the clip has colour and the fit showed enough of both skin
+    /// and clothes).
+    pub skin: Option<SkinModel>,
     pub frames: Vec<TrackedFrame>,
     pub timing: Timing,
 }
@@ -417,9 +422,19 @@ impl Tracker {
         let threads = self.threads();
         let helpers = if threads > 1 { threads } else { 0 };
         std::thread::scope(|scope| {
-            let frames = Prefetch::new(scope, frames, size, helpers, &self.opts.features);
+            let features = self.features();
+            let frames = Prefetch::new(scope, frames, size, helpers, &features);
             self.track_prefetched(frames, total, started, on_frame)
         })
+    }
+
+    /// The feature options frames are computed with: [`TrackOptions::features`],
+    /// with the person's colours kept when the skin term is weighed.
+    pub fn features(&self) -> FeatureOptions {
+        FeatureOptions {
+            colours: self.opts.weights.skin > 0.0,
+            ..self.opts.features.clone()
+        }
     }
 
     /// The threads this tracker uses ([`TrackOptions::threads`], 0 for the machine's
@@ -444,7 +459,10 @@ impl Tracker {
         // The next frame's index, target (None without a person) and score as an
         // initial frame; None after the last frame.
         type Next = Option<Result<(usize, Option<Target>, f64), TrackError>>;
-        let mut next_target = |prev: &mut Option<FrameFeatures>, timing: &mut Timing| -> Next {
+        let mut next_target = |prev: &mut Option<FrameFeatures>,
+                               timing: &mut Timing,
+                               skin: Option<&SkinModel>|
+         -> Next {
             let t0 = Instant::now();
             let (index, mut f) = match frames.next()? {
                 Ok(next) => next,
@@ -452,8 +470,13 @@ impl Tracker {
             };
             link(&mut f, prev.as_ref(), &self.opts.features);
             let score = init_score(&f);
-            let target =
-                (f.body_height >= MIN_PERSON_HEIGHT).then(|| Target::new(&f, &self.opts.weights));
+            let target = (f.body_height >= MIN_PERSON_HEIGHT).then(|| {
+                let mut t = Target::new(&f, &self.opts.weights);
+                if let Some(m) = skin {
+                    t.add_skin(m, self.opts.weights.skin);
+                }
+                t
+            });
             *prev = Some(f);
             timing.features += t0.elapsed().as_secs_f64();
             Some(Ok((index, target, score)))
@@ -475,7 +498,7 @@ impl Tracker {
             if enough {
                 break;
             }
-            let Some(next) = next_target(&mut prev_features, &mut timing) else {
+            let Some(next) = next_target(&mut prev_features, &mut timing, None) else {
                 exhausted = true;
                 break;
             };
@@ -529,6 +552,18 @@ impl Tracker {
         // Initialisation gives up early when asked to stop; its result is then moot.
         self.check_stop()?;
         let body = Body::new(&shape);
+        // The clip's skin colour, from the initialisation's best fit (before the
+        // next frames choose between the candidates, which they do with it);
+        // every frame's target rewards the bare parts for covering it from now on.
+        let skin = (self.opts.weights.skin > 0.0)
+            .then(|| learn_skin(&body, &self.camera, init_target, &candidates[0]))
+            .flatten();
+        if let Some(m) = &skin {
+            for t in pending.iter_mut().filter_map(|p| p.target.as_mut()) {
+                t.add_skin(m, self.opts.weights.skin);
+            }
+        }
+        let init_target = pending[init].target.as_ref().expect("a person frame");
         // Several candidates: keep the one that explains the next frames best (a
         // near tie goes to the one facing the camera, [`choose_hypothesis`]).
         let init_pose = if candidates.len() == 1 {
@@ -659,7 +694,7 @@ impl Tracker {
             drop(targets);
 
             // Phase 4: stream the rest.
-            while let Some(next) = next_target(&mut prev_features, &mut timing) {
+            while let Some(next) = next_target(&mut prev_features, &mut timing, skin.as_ref()) {
                 let (i, target, _) = match next {
                     Ok(next) => next,
                     Err(e) => {
@@ -693,6 +728,7 @@ impl Tracker {
             shape,
             init_frame: init,
             ground,
+            skin,
             frames: out,
             timing,
         })

@@ -31,7 +31,9 @@ use imageproc::drawing::{
 };
 
 use super::blobs::{Blobs, Connectivity};
+use super::skin::colour_bins;
 use crate::body::Mask;
+use std::sync::Arc;
 
 /// Tuning of [`compute`]. Lengths given as a fraction of the body height are relative
 /// to the height of the person's bounding box in the current frame.
@@ -64,6 +66,9 @@ pub struct FeatureOptions {
     /// Below this body height (pixels) no head, neck, crotch or regions are sought and
     /// extremity candidates are left [`ExtremityKind::Unknown`]. Default 16.
     pub min_body_height: u32,
+    /// Keep the colour bin of each of the person's pixels
+    /// ([`FrameFeatures::colours`], for the skin term); off unless it is weighed.
+    pub colours: bool,
 }
 
 impl Default for FeatureOptions {
@@ -78,6 +83,7 @@ impl Default for FeatureOptions {
             min_blob_fraction: 0.005,
             max_jump: 0.15,
             min_body_height: 16,
+            colours: false,
         }
     }
 }
@@ -152,6 +158,10 @@ pub struct FrameFeatures {
     /// Height of the person's bounding box in pixels (the length unit of the
     /// fractional options); 0 when empty.
     pub body_height: f64,
+    /// The colour bin of each of the person's pixels ([`super::skin::colour_bins`]),
+    /// for the skin term; None without a colour frame or
+    /// [`FeatureOptions::colours`].
+    pub colours: Option<Arc<Vec<u16>>>,
 }
 
 impl FrameFeatures {
@@ -225,6 +235,7 @@ pub fn compute_unlinked(
         person: Mask::new(w, h),
         bbox: None,
         body_height: 0.0,
+        colours: None,
     };
     if silhouette.count() == 0 {
         return f;
@@ -235,6 +246,9 @@ pub fn compute_unlinked(
         return f;
     };
     let body_h = (bbox[3] - bbox[1] + 1) as f64;
+    if opts.colours {
+        f.colours = frame.and_then(|fr| colour_bins(fr, &person)).map(Arc::new);
+    }
     f.person = person;
     f.bbox = Some(bbox);
     f.body_height = body_h;

@@ -6,3 +6,4 @@ pub mod blobs;
 pub mod cleanup;
 pub mod features;
 pub mod silhouette;
+pub mod skin;
