@@ -657,6 +657,27 @@ impl Fragments {
             normal: vec![[0.0; 3]; n],
         }
     }
+
+    /// The label of pixel `i`'s nearest part (`label` of its index into
+    /// `body.parts`) when its four neighbours show parts of the same label; None
+    /// where it or a neighbour shows no part, and on the image's border.
+    pub fn inner_label<T: PartialEq>(&self, i: usize, label: impl Fn(usize) -> T) -> Option<T> {
+        let w = self.width as usize;
+        let (x, y) = (i % w, i / w);
+        if x == 0 || y == 0 || x + 1 >= w || y + 1 >= self.height as usize {
+            return None;
+        }
+        let of = |j: usize| {
+            self.depth[j]
+                .is_finite()
+                .then(|| label(self.part[j] as usize))
+        };
+        let l = of(i)?;
+        [i - 1, i + 1, i - w, i + w]
+            .iter()
+            .all(|&j| of(j).as_ref() == Some(&l))
+            .then_some(l)
+    }
 }
 
 /// Depth-tested render of the visible surface (for colour clips and previews).

@@ -209,11 +209,6 @@ impl Target {
         }
     }
 
-    /// The colour bins of the person's pixels, when the frame had colour.
-    pub fn colours(&self) -> Option<&[u16]> {
-        self.colours.as_deref().map(|v| v.as_slice())
-    }
-
     /// Rewards the model's bare parts for covering pixels of skin colour: −`weight`
     /// (at most [`MAX_SKIN_WEIGHT`]) × (2p − 1) where the skin model gives a
     /// probability p above ½. Nothing without a colour frame or with a weight of 0.
@@ -260,31 +255,17 @@ impl Target {
 /// model, and the image's border, are left out (the fit's outlines are not exact). None without a colour frame or
 /// with too few pixels of either kind.
 pub fn learn_skin(body: &Body, cam: &Camera, target: &Target, pose: &Pose) -> Option<SkinModel> {
-    let colours = target.colours()?;
+    let colours = target.colours.as_deref()?;
     let (w, h) = (cam.width, cam.height);
     let mut frags = Fragments::new(w, h);
     render_fragments(body, &body.posed(pose), cam, &mut frags);
     let (mut skin, mut other) = (Mask::new(w, h), Mask::new(w, h));
-    let label = |x: u32, y: u32| {
-        let i = (y * w + x) as usize;
-        frags.depth[i]
-            .is_finite()
-            .then(|| is_bare(body, frags.part[i] as usize))
-    };
-    for y in 1..h.saturating_sub(1) {
-        for x in 1..w.saturating_sub(1) {
-            let Some(bare) = label(x, y) else {
-                continue;
-            };
-            let same = [(x - 1, y), (x + 1, y), (x, y - 1), (x, y + 1)]
-                .iter()
-                .all(|&(a, b)| label(a, b) == Some(bare));
-            if same {
-                if bare {
-                    skin.set(x, y, true);
-                } else {
-                    other.set(x, y, true);
-                }
+    for y in 0..h {
+        for x in 0..w {
+            match frags.inner_label((y * w + x) as usize, |p| is_bare(body, p)) {
+                Some(true) => skin.set(x, y, true),
+                Some(false) => other.set(x, y, true),
+                None => {}
             }
         }
     }
@@ -547,13 +528,9 @@ impl<'a> Evaluator<'a> {
         if !self.target.skin_gain.is_empty() {
             let bare: Vec<usize> = (0..PART_COUNT).filter(|&i| is_bare(self.body, i)).collect();
             let mut skin = Mask::new(self.cam.width, self.cam.height);
-            render_parts(self.body, &self.posed, self.cam, &bare, &mut skin);
-            for y in 0..self.cam.height {
-                for x in 0..self.cam.width {
-                    if skin.get(x, y) {
-                        t.skin += self.target.skin_gain[(y * self.cam.width + x) as usize] as f64;
-                    }
-                }
+            if let Some((y0, y1)) = render_parts(self.body, &self.posed, self.cam, &bare, &mut skin)
+            {
+                t.skin = sum_over(&self.target.skin_gain, &skin, None, y0, y1);
             }
         }
         let ok = within_limits(pose) && !self.below_ground();

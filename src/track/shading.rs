@@ -63,20 +63,15 @@ impl Shading {
         let mut xty = [Vector4::<f64>::zeros(); MATERIALS];
         let mut yty = [0.0f64; MATERIALS];
         let mut count = [0u64; MATERIALS];
-        let material = |k: usize| material_index(body.parts[fr.part[k] as usize].material);
-        for y in 1..h.saturating_sub(1) {
-            for x in 1..w.saturating_sub(1) {
+        for y in 0..h {
+            for x in 0..w {
                 let i = y * w + x;
-                if !fr.depth[i].is_finite() || !person.get(x as u32, y as u32) {
+                if !person.get(x as u32, y as u32) {
                     continue;
                 }
-                let m = material(i);
-                let inside = [i - 1, i + 1, i - w, i + w]
-                    .iter()
-                    .all(|&j| fr.depth[j].is_finite() && material(j) == m);
-                if !inside {
+                let Some(m) = fr.inner_label(i, |p| material_index(body.parts[p].material)) else {
                     continue;
-                }
+                };
                 let n = fr.normal[i];
                 let v = Vector4::new(1.0, f64::from(n[0]), f64::from(n[1]), f64::from(n[2]));
                 let lum = f64::from(luma[i]);
