@@ -302,10 +302,10 @@ struct BenchArgs {
     /// what the shape fit costs).
     #[arg(long)]
     oracle_shape: bool,
-    /// Start each frame's search from the previous pose moved by the root
-    /// position's velocity alone (by default every parameter's, as the paper has it).
+    /// Start each frame's search from the previous pose moved by every parameter's
+    /// velocity, as the paper has it (by default the root position's alone).
     #[arg(long)]
-    root_velocity: bool,
+    joint_velocity: bool,
     /// Also write every frame's figures to this CSV file (PCK, PA-MPJPE, IoU, cost,
     /// the truth's cost, heading error, depth ratio).
     #[arg(long, value_name = "CSV")]
@@ -648,7 +648,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
-    opts.track.joint_velocity = !a.root_velocity;
+    opts.track.joint_velocity = a.joint_velocity;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
     a.refit.apply(&mut opts.track)?;

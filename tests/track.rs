@@ -544,12 +544,12 @@ fn a_bow_towards_the_camera_is_tracked_mostly_in_the_trunk() {
 /// The Bandai walk seen from azimuth −120°, tracked from its true first shape and
 /// pose on its true silhouettes (`monocap bench --only walk_normal --azimuths=-120
 /// --lead-in 10 --oracle-init --true-silhouettes`). With every parameter's velocity
-/// carried into each frame's start, as the paper has it (the default), the
+/// carried into each frame's start, as the paper has it (`--joint-velocity`), the
 /// group-by-group search loses part of the walker (the groups compensate for each
 /// other and no single group can improve), and the joint polish over all parameters
 /// at once keeps more of it: measured IoU 0.777 and 0.886 (2026-11-26, the polish on
 /// every frame, after the jumps). With the root's position's velocity alone
-/// (`--root-velocity`) the group search keeps the walker by itself: 0.912.
+/// (the default) the group search keeps the walker by itself: 0.912.
 #[test]
 fn the_joint_velocity_loses_a_walker_the_polish_or_the_root_velocity_keeps() {
     use monocap::track::bench::{run_clip, BenchOptions};

@@ -164,16 +164,18 @@ pub struct TrackOptions {
     /// with 3 runs 166 → 14 cm.
     pub global_first: bool,
     /// Carry every parameter's velocity into the next frame's start, as the paper
-    /// does (the default); false carries the root's position's alone. Angles are
+    /// does; false (the default) carries the root's position's alone. Angles are
     /// only partly seen in a silhouette (a limb's depth and twist, the body's
     /// heading), so their frame-to-frame difference is much of it the search's own
     /// jitter, and carried on it pushes the next start further off. From the true
     /// first pose (accuracy benchmark with a lead-in) PCK@0.1 0.913 with every
-    /// velocity and 0.948 with the root position's alone; but from the tracker's
-    /// own initialisation 0.861 and 0.852 (its front/back choice went the other way
-    /// on some clips), and on the DAVIS masks the mean IoU went from 0.781 to
-    /// 0.772: so the paper's start stays the default (README, "The velocity the
-    /// search starts from").
+    /// velocity and 0.948 with the root position's alone; from the tracker's own
+    /// initialisation 0.861 → 0.876 (without a lead-in 0.850 → 0.855), PA-MPJPE
+    /// 126.3 → 118.6 mm, lost frames 30 → 37 (a fast turn the heading's velocity
+    /// no longer follows). The probes that choose between the initial candidates
+    /// carry every velocity whatever this says: with the root's alone there, the
+    /// front/back choice went the other way on some frontal clips (README, "The
+    /// root's velocity, the probes' in full").
     pub joint_velocity: bool,
     /// Simplex evaluations per group and run, per parameter of the group (plus one).
     pub evals_per_param: usize,
@@ -255,7 +257,7 @@ impl Default for TrackOptions {
             weights: Weights::default(),
             restarts: 3,
             global_first: false,
-            joint_velocity: true,
+            joint_velocity: false,
             evals_per_param: 25,
             polish_evals: POLISH_EVALS,
             polish_iou: POLISH_IOU,
@@ -591,6 +593,7 @@ impl Tracker {
                 par_map(&candidates, self.threads(), |c| {
                     let mut probe = Search::new(self, &body, sole_height(&body, &body.posed(c)));
                     probe.weigh_outlines = false;
+                    probe.joint_velocity = true;
                     let mut total = 0.0;
                     for run in [&after, &before] {
                         let mut history = History::new(*c);
@@ -1104,6 +1107,9 @@ struct Search<'a> {
     /// Weigh the inner outlines in ([`Search::outline_cost`]); off for the probes
     /// that compare the initial candidates, which F and the facing rule decide.
     weigh_outlines: bool,
+    /// Carry every parameter's velocity into each frame's start
+    /// ([`TrackOptions::joint_velocity`]; always for the probes).
+    joint_velocity: bool,
 }
 
 impl<'a> Search<'a> {
@@ -1116,6 +1122,7 @@ impl<'a> Search<'a> {
             evals: 0,
             outlines: std::cell::RefCell::new(None),
             weigh_outlines: true,
+            joint_velocity: tracker.opts.joint_velocity,
         }
     }
 
@@ -1185,11 +1192,11 @@ impl<'a> Search<'a> {
             // the silhouette (same depth) before searching around it.
             self.replace_over(&mut ev, target, &mut prev);
         }
-        // Every parameter's velocity carries on, or the root position's alone
-        // ([`TrackOptions::joint_velocity`]).
+        // The root position's velocity carries on, or every parameter's
+        // ([`Search::joint_velocity`]).
         let mut predicted = prev;
         if let Some(before) = history.before {
-            let moving = if opts.joint_velocity {
+            let moving = if self.joint_velocity {
                 0..MOTION_COUNT
             } else {
                 ix::ROOT_TX..ix::ROOT_TZ + 1
