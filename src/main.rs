@@ -310,6 +310,10 @@ struct BenchArgs {
     /// the truth's cost, heading error, depth ratio).
     #[arg(long, value_name = "CSV")]
     per_frame: Option<PathBuf>,
+    /// Seed of the clips' background and sensor noise: the same motions rendered
+    /// with other noise, to see how far the figures move by chance.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -645,6 +649,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         true_silhouettes: a.true_silhouettes,
         oracle_init: a.oracle_init,
         oracle_shape: a.oracle_shape,
+        seed: a.seed,
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;

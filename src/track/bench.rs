@@ -75,6 +75,10 @@ pub struct BenchOptions {
     pub oracle_init: bool,
     /// Give the initialisation the true shape (it fits the pose alone).
     pub oracle_shape: bool,
+    /// Seed of the rendered clips' background and sensor noise
+    /// ([`SynthOptions::seed`]): another seed renders the same motion with other
+    /// noise, which shows how far the figures move by chance.
+    pub seed: u64,
     pub track: TrackOptions,
 }
 
@@ -93,6 +97,7 @@ impl Default for BenchOptions {
             true_silhouettes: false,
             oracle_init: false,
             oracle_shape: false,
+            seed: SynthOptions::default().seed,
             track: TrackOptions::default(),
         }
     }
@@ -224,6 +229,7 @@ pub fn run_clip(
         empty_frames: lead,
         azimuth_deg: azimuth,
         duration_s: Some(opts.duration_s),
+        seed: opts.seed,
         ..SynthOptions::default()
     };
     let mut frames: Vec<RgbImage> = Vec::new();
