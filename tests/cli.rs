@@ -4,7 +4,7 @@
 mod common;
 
 use common::{monocap, s, TempDir};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 use std::process::Output;
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
@@ -392,14 +392,20 @@ fn tiny_images_and_ranges_past_the_end_fail_cleanly_or_work() {
     );
 }
 
+/// A mocap folder in `dir` holding the fixture capture alone, for `bench --mocap`.
+fn fixture_mocap(dir: &TempDir) -> PathBuf {
+    let mocap = dir.path("mocap");
+    std::fs::create_dir_all(&mocap).unwrap();
+    std::fs::copy(FIXTURE, mocap.join("run.bvh")).unwrap();
+    mocap
+}
+
 /// `bench --per-frame` writes one CSV row per frame with a person, after a header,
 /// for every clip it prints; a path it cannot create is one clear line.
 #[test]
 fn bench_writes_its_per_frame_figures() {
     let dir = TempDir::new("cli-bench");
-    let mocap = dir.path("mocap");
-    std::fs::create_dir_all(&mocap).unwrap();
-    std::fs::copy(FIXTURE, mocap.join("run.bvh")).unwrap();
+    let mocap = fixture_mocap(&dir);
     let csv = dir.path("frames.csv");
     let bench = |csv: &Path| {
         monocap(&[
@@ -485,9 +491,7 @@ fn bench_writes_its_per_frame_figures() {
 #[test]
 fn bench_seeds_the_clips_noise() {
     let dir = TempDir::new("cli-bench-seed");
-    let mocap = dir.path("mocap");
-    std::fs::create_dir_all(&mocap).unwrap();
-    std::fs::copy(FIXTURE, mocap.join("run.bvh")).unwrap();
+    let mocap = fixture_mocap(&dir);
     let run = |seed: Option<&str>, name: &str| {
         let csv = dir.path(name);
         let mut args = vec![
