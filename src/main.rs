@@ -306,6 +306,10 @@ struct BenchArgs {
     /// velocity, as the paper has it (by default the root position's alone).
     #[arg(long)]
     joint_velocity: bool,
+    /// Start from the initial candidate the front/back choice does not take (shows
+    /// what the choice is worth: run the benchmark with and without it).
+    #[arg(long)]
+    other_candidate: bool,
     /// Also write every frame's figures to this CSV file (PCK, PA-MPJPE, IoU, cost,
     /// the truth's cost, heading error, depth ratio).
     #[arg(long, value_name = "CSV")]
@@ -654,6 +658,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     };
     opts.track.restarts = a.restarts;
     opts.track.joint_velocity = a.joint_velocity;
+    opts.track.other_candidate = a.other_candidate;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
     a.refit.apply(&mut opts.track)?;

@@ -122,6 +122,30 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
 }
 
 #[test]
+fn the_other_candidate_starts_turned_round() {
+    let (masks, _, opts) = run_masks();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let heading = |other_candidate: bool| {
+        let o = TrackOptions {
+            other_candidate,
+            ..TrackOptions::default()
+        };
+        let track = Tracker::new(cam.clone(), o)
+            .track(inputs(&masks), Some(masks.len()), |_, _| {
+                ControlFlow::Continue(())
+            })
+            .unwrap();
+        track.frames[track.init_frame].pose[monocap::body::params::ix::ROOT_RY]
+    };
+    let (chosen, other) = (heading(false), heading(true));
+    let turned = (chosen - other).rem_euclid(360.0);
+    assert!(
+        turned.min(360.0 - turned) > 90.0,
+        "headings {chosen:.0} and {other:.0}"
+    );
+}
+
+#[test]
 fn canceling_stops_the_tracker() {
     let (masks, _, _) = run_masks();
     let o = TrackOptions {

@@ -64,7 +64,7 @@ const HYPOTHESIS_FRAMES: usize = 15;
 
 /// Initial candidates whose summed costs over [`HYPOTHESIS_FRAMES`] lie within this
 /// fraction of each other are a tie ([`choose_hypothesis`]).
-const FACING_TIE: f64 = 0.01;
+const FACING_TIE: f64 = 0.02;
 
 /// The default of [`TrackOptions::recover_iou`].
 const RECOVER_IOU: f64 = 0.75;
@@ -177,6 +177,12 @@ pub struct TrackOptions {
     /// front/back choice went the other way on some frontal clips (README, "The
     /// root's velocity, the probes' in full").
     pub joint_velocity: bool,
+    /// Start from the initial candidate the front/back choice would not take
+    /// ([`choose_hypothesis`]; the only one when initialisation found one). A
+    /// benchmark diagnostic: a track from each candidate shows what the choice is
+    /// worth, and which rule would choose better (README, "What the front/back
+    /// choice is worth").
+    pub other_candidate: bool,
     /// Simplex evaluations per group and run, per parameter of the group (plus one).
     pub evals_per_param: usize,
     /// Evaluations of the joint polish (0, the default: none): CMA-ES over every
@@ -258,6 +264,7 @@ impl Default for TrackOptions {
             restarts: 3,
             global_first: false,
             joint_velocity: false,
+            other_candidate: false,
             evals_per_param: 25,
             polish_evals: POLISH_EVALS,
             polish_iou: POLISH_IOU,
@@ -611,7 +618,11 @@ impl Tracker {
                 timing.evals += evals;
                 totals.push((total, *c));
             }
-            choose_hypothesis(&totals, &self.camera)
+            let chosen = choose_hypothesis(&totals, &self.camera);
+            match totals.iter().find(|(_, p)| *p != chosen) {
+                Some((_, other)) if self.opts.other_candidate => *other,
+                _ => chosen,
+            }
         };
         // A keyframe on the initial frame overrides what initialisation found.
         let mut search = Search::new(self, &body, f64::NEG_INFINITY);
@@ -884,11 +895,14 @@ impl Tracker {
 ///
 /// One silhouette cannot tell a body from its mirror image in depth (facing the
 /// camera or turned away, left and right swapped): only perspective separates them,
-/// and only a little. On the benchmark's seven frontal clips whose candidates
-/// were such a pair they came within 0.04–3.4% of each other, and the mirror image
-/// was cheaper three times, by 0.04–0.36%; real clips for motion capture mostly
-/// start with the person facing the camera, so a tie goes that way. A keyframe on
-/// the initial frame overrides it.
+/// and only a little. On the benchmark's frontal clips the right one of the two was
+/// the dearer over the probe frames in 24 of 54 clip runs, a coin toss. Real clips
+/// for motion capture mostly start with the person facing the camera, so a tie goes
+/// that way. Over the accuracy benchmark's 162 clip runs (three noise seeds, with
+/// and without a lead-in, each clip tracked from both candidates) the cheapest
+/// candidate scores a mean PCK@0.1 of 0.753, a 1% tie 0.826 and a 2% tie 0.843; a
+/// 2% tie turned 8 choices, 6 of them gaining 0.15–0.63 of a clip's PCK and one (a
+/// person facing away) losing 0.28. A keyframe on the initial frame overrides it.
 fn choose_hypothesis(candidates: &[(f64, Pose)], camera: &Camera) -> Pose {
     let cheapest = candidates
         .iter()
@@ -1792,11 +1806,11 @@ mod tests {
     fn a_near_tie_goes_to_the_pose_facing_the_camera() {
         let cam = Camera::new(320, 240, 55.0);
         let (front, back) = (facing(5.0), facing(175.0));
-        // Within 1%: the front wins even though it costs a little more.
-        let got = choose_hypothesis(&[(-1000.0, back), (-995.0, front)], &cam);
+        // Within 2%: the front wins even though it costs a little more.
+        let got = choose_hypothesis(&[(-1000.0, back), (-985.0, front)], &cam);
         assert_eq!(got[ix::ROOT_RY], 5.0);
         // Clearly cheaper: the back stays.
-        let got = choose_hypothesis(&[(-1000.0, back), (-980.0, front)], &cam);
+        let got = choose_hypothesis(&[(-1000.0, back), (-975.0, front)], &cam);
         assert_eq!(got[ix::ROOT_RY], 175.0);
         // The cheapest already faces the camera.
         let got = choose_hypothesis(&[(-995.0, back), (-1000.0, front)], &cam);
