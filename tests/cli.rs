@@ -400,6 +400,35 @@ fn fixture_mocap(dir: &TempDir) -> PathBuf {
     mocap
 }
 
+/// A short `bench` on the `mocap` folder (one run per frame, `extra` arguments
+/// last), writing its per-frame figures to `csv`.
+fn short_bench(
+    mocap: &Path,
+    azimuths: &str,
+    lead_in: &str,
+    duration_s: &str,
+    csv: &Path,
+    extra: &[&str],
+) -> Output {
+    let mut args = vec![
+        "bench",
+        "--mocap",
+        s(mocap),
+        "--azimuths",
+        azimuths,
+        "--lead-in",
+        lead_in,
+        "--duration-s",
+        duration_s,
+        "--restarts",
+        "1",
+        "--per-frame",
+        s(csv),
+    ];
+    args.extend_from_slice(extra);
+    monocap(&args)
+}
+
 /// `bench --per-frame` writes one CSV row per frame with a person, after a header,
 /// for every clip it prints; a path it cannot create is one clear line.
 #[test]
@@ -407,23 +436,7 @@ fn bench_writes_its_per_frame_figures() {
     let dir = TempDir::new("cli-bench");
     let mocap = fixture_mocap(&dir);
     let csv = dir.path("frames.csv");
-    let bench = |csv: &Path| {
-        monocap(&[
-            "bench",
-            "--mocap",
-            s(&mocap),
-            "--azimuths",
-            "0",
-            "--lead-in",
-            "0,3",
-            "--duration-s",
-            "0.3",
-            "--restarts",
-            "1",
-            "--per-frame",
-            s(csv),
-        ])
-    };
+    let bench = |csv: &Path| short_bench(&mocap, "0", "0,3", "0.3", csv, &[]);
     let out = bench(&csv);
     assert_success("bench", &out);
     let text = std::fs::read_to_string(&csv).unwrap();
@@ -456,22 +469,7 @@ fn bench_writes_its_per_frame_figures() {
     // Started from the true shape and pose, the first frame's tracked pose is the
     // truth: its cost and the truth's, scored by the benchmark on its own, agree.
     let oracle = dir.path("oracle.csv");
-    let out = monocap(&[
-        "bench",
-        "--mocap",
-        s(&mocap),
-        "--azimuths",
-        "60",
-        "--lead-in",
-        "2",
-        "--duration-s",
-        "0.2",
-        "--restarts",
-        "1",
-        "--oracle-init",
-        "--per-frame",
-        s(&oracle),
-    ]);
+    let out = short_bench(&mocap, "60", "2", "0.2", &oracle, &["--oracle-init"]);
     assert_success("bench --oracle-init", &out);
     let text = std::fs::read_to_string(&oracle).unwrap();
     let first: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
@@ -494,25 +492,11 @@ fn bench_seeds_the_clips_noise() {
     let mocap = fixture_mocap(&dir);
     let run = |seed: Option<&str>, name: &str| {
         let csv = dir.path(name);
-        let mut args = vec![
-            "bench",
-            "--mocap",
-            s(&mocap),
-            "--azimuths",
-            "0",
-            "--lead-in",
-            "3",
-            "--duration-s",
-            "0.3",
-            "--restarts",
-            "1",
-            "--per-frame",
-            s(&csv),
-        ];
-        if let Some(seed) = seed {
-            args.extend(["--seed", seed]);
-        }
-        assert_success("bench", &monocap(&args));
+        let extra = match seed {
+            Some(seed) => vec!["--seed", seed],
+            None => vec![],
+        };
+        assert_success("bench", &short_bench(&mocap, "0", "3", "0.3", &csv, &extra));
         std::fs::read_to_string(&csv).unwrap()
     };
     let default = run(None, "default.csv");
