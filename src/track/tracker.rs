@@ -748,14 +748,6 @@ impl Tracker {
         })
     }
 
-    /// Initialisation (method.md §5, paper §5.1) on one frame: place the standard
-    /// body from the silhouette's bounding box, fit the pose from several headings
-    /// (the silhouette does not say which way the person faces) and keep the best,
-    /// then fit the 12 shape values with the root translation, and the pose again.
-    ///
-    /// Returns the shape and the candidate poses, best first: the best fit and the
-    /// best one facing more than 90° away from it (a silhouette seen from the front
-    /// and from the back is nearly the same; the frames that follow tell them apart).
     /// [`TrackError::Canceled`] once [`TrackOptions::stop`] is set.
     fn check_stop(&self) -> Result<(), TrackError> {
         match &self.opts.stop {
@@ -768,9 +760,16 @@ impl Tracker {
         self.check_stop().is_err()
     }
 
-    /// Fits the shape and the first pose to `target` (several candidate poses when
-    /// front and back are ambiguous). Returns early, with a meaningless result, when
-    /// [`TrackOptions::stop`] is set.
+    /// Initialisation (method.md §5, paper §5.1) on one frame: place the standard
+    /// body from the silhouette's bounding box, fit the pose from several headings
+    /// (the silhouette does not say which way the person faces) and keep the best,
+    /// then fit the 12 shape values with the root translation, and the pose again.
+    ///
+    /// Returns the shape and the candidate poses, best first: the best fit and the
+    /// best one facing more than 90° away from it, fitted with the best fit's shape
+    /// (a silhouette seen from the front and from the back is nearly the same; the
+    /// frames that follow tell them apart). Returns early, with a meaningless
+    /// result, when [`TrackOptions::stop`] is set.
     pub fn initialise(&self, target: &Target) -> (ShapeValues, Vec<Pose>) {
         let cam = &self.camera;
         let bbox = mask_bbox(&target.silhouette).expect("a person");
