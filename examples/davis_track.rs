@@ -9,13 +9,14 @@
 //! frame with the input mask and the model's silhouette tinted over it.
 //!
 //! ```text
-//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N]
+//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--two-way]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
 //! paper's objective, `Weights::track_rewards`), `--reward-rim N` then withholds them
 //! near the outline (`Weights::reward_rim`); `--polish-evals N` sets the joint
-//! polish's budget (`TrackOptions::polish_evals`, 0 for none).
+//! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--two-way` adds the
+//! second pass (`TrackOptions::two_way`).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -90,10 +91,13 @@ fn main() -> Result<()> {
     let mut reward_rim = 0.0;
     let mut track_rewards = false;
     let mut polish_evals = TrackOptions::default().polish_evals;
+    let mut two_way = TrackOptions::default().two_way;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
         if a == "--track-rewards" {
             track_rewards = true;
+        } else if a == "--two-way" {
+            two_way = true;
         } else if a == "--reward-rim" {
             let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
             match v {
@@ -115,6 +119,12 @@ fn main() -> Result<()> {
         }
     }
 
+    let mut track = TrackOptions::default();
+    track.weights.reward_rim = reward_rim;
+    track.weights.track_rewards = track_rewards;
+    track.polish_evals = polish_evals;
+    track.two_way = two_way;
+
     let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
     let started = Instant::now();
@@ -126,7 +136,7 @@ fn main() -> Result<()> {
             println!("{seq}: {} not found, skipped", dir.display());
             continue;
         }
-        match run_sequence(seq, &dir, &tmp, track_rewards, reward_rim, polish_evals) {
+        match run_sequence(seq, &dir, &tmp, track.clone()) {
             Ok(r) => results.push(r),
             Err(e) => {
                 outcome = Err(e.context(format!("sequence {seq}")));
@@ -187,14 +197,7 @@ fn read_mask(path: &Path) -> Result<(Mask, [u64; 3])> {
     Ok((Mask::from_gray(&gray, 128), hist))
 }
 
-fn run_sequence(
-    seq: &str,
-    dir: &Path,
-    tmp: &Path,
-    track_rewards: bool,
-    reward_rim: f64,
-    polish_evals: usize,
-) -> Result<SeqResult> {
+fn run_sequence(seq: &str, dir: &Path, tmp: &Path, track: TrackOptions) -> Result<SeqResult> {
     let masks = list(&dir.join("masks"), "png")?;
     let frames = list(&dir.join("frames"), "jpg")?;
     if masks.is_empty() {
@@ -210,13 +213,11 @@ fn run_sequence(
     let zip_path = tmp.join(format!("{seq}.zip"));
     pack_zip(&masks, &zip_path)?;
 
-    let mut opts = ClipTrackOptions {
+    let opts = ClipTrackOptions {
         masks: true,
+        track,
         ..ClipTrackOptions::default()
     };
-    opts.track.weights.reward_rim = reward_rim;
-    opts.track.polish_evals = polish_evals;
-    opts.track.weights.track_rewards = track_rewards;
     let t0 = Instant::now();
     let mut done = 0usize;
     let clip: ClipTrack = track_clip(&zip_path, &opts, |_, _| {

@@ -584,10 +584,12 @@ fn track_clip(cam: &Camera, masks: &[Mask], initial: Pose, restarts: usize) -> R
         fps: FPS,
         init_frame: Some(0),
         initial: Some((STANDARD_SHAPE, initial)),
-        // The paper's restarts alone: the joint polish (off by default) and the
-        // smoothed refit (a second search of every frame) would blur the comparison.
+        // The paper's restarts alone: the joint polish (off by default), the
+        // smoothed refit (a second search of every frame) and the second pass (a
+        // second track, backwards) would blur the comparison.
         polish_evals: 0,
         refit_sigma: 0.0,
+        two_way: false,
         ..TrackOptions::default()
     };
     let inputs = masks.iter().map(|m| {

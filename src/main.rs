@@ -175,9 +175,14 @@ impl WeightArgs {
     }
 }
 
-/// The smoothed refit's flags (`track` and `bench`).
+/// The flags of the passes after the first (`track` and `bench`).
 #[derive(Args)]
 struct RefitArgs {
+    /// The second pass: each block of 150 frames tracked again backwards from its
+    /// end, initialised afresh, a frame taking that answer where it costs at least
+    /// 30% less. More accurate, under half the speed; frames come a block at a time.
+    #[arg(long)]
+    two_way: bool,
     /// The smoothed refit: each frame searched again from the Gaussian average of
     /// its neighbours' poses, this many frames wide (0 for none); on a helper
     /// thread behind the search when there are two threads or more.
@@ -189,8 +194,9 @@ struct RefitArgs {
 }
 
 impl RefitArgs {
-    /// The two flags, checked, into `track`.
+    /// The flags, checked, into `track`.
     fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
+        track.two_way = self.two_way;
         let (sigma, runs) = (self.refit_sigma, self.refit_runs);
         monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
             .map_err(anyhow::Error::msg)?;

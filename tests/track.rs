@@ -121,6 +121,52 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
     assert!(pck >= 0.8, "PCK {pck:.3}");
 }
 
+/// The second pass only ever replaces a frame by a clearly cheaper answer: the
+/// first pass is the one-way track, frame for frame.
+#[test]
+fn the_second_pass_keeps_the_first_or_a_clearly_cheaper_answer() {
+    let (masks, _, opts) = run_masks();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let track = |two_way: bool| {
+        let o = TrackOptions {
+            two_way,
+            ..TrackOptions::default()
+        };
+        Tracker::new(cam.clone(), o)
+            .track(inputs(&masks), Some(masks.len()), |_, _| {
+                ControlFlow::Continue(())
+            })
+            .unwrap()
+    };
+    let (one, two) = (track(false), track(true));
+    assert_eq!(one.shape, two.shape);
+    assert!(
+        two.timing.evals > one.timing.evals * 3 / 2,
+        "the second pass ran: {} evaluations against {}",
+        two.timing.evals,
+        one.timing.evals
+    );
+    let mut replaced = 0;
+    for (a, b) in one.frames.iter().zip(&two.frames) {
+        assert_eq!((a.index, a.person), (b.index, b.person));
+        if a != b {
+            let (ca, cb) = (a.cost.unwrap(), b.cost.unwrap());
+            assert!(
+                cb < ca - monocap::track::tracker::TWO_WAY_MARGIN * ca.abs(),
+                "frame {}: {cb} replaced {ca}",
+                a.index
+            );
+            replaced += 1;
+        }
+    }
+    println!(
+        "the second pass replaced {replaced} of {} frames ({} evaluations against {})",
+        masks.len(),
+        two.timing.evals,
+        one.timing.evals
+    );
+}
+
 #[test]
 fn the_other_candidate_starts_turned_round() {
     let (masks, _, opts) = run_masks();

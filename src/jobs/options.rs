@@ -29,6 +29,10 @@ pub struct JobOptions {
     /// Runs of the search in each frame's refit, 1 to 20 (default 2).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_runs: Option<usize>,
+    /// The second pass, backwards over each block of 150 frames (default false;
+    /// see `TrackOptions::two_way`): more accurate, under half the speed.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub two_way: Option<bool>,
     /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub keyframes: Option<serde_json::Value>,
@@ -145,6 +149,9 @@ impl JobOptions {
         let runs = self.refit_runs.unwrap_or(o.track.refit_runs);
         check_refit(sigma, runs, ("refit_sigma", "refit_runs"))?;
         (o.track.refit_sigma, o.track.refit_runs) = (sigma, runs);
+        if let Some(t) = self.two_way {
+            o.track.two_way = t;
+        }
         let w = &mut o.track.weights;
         for (name, v, slot) in [
             ("w_edge", self.w_edge, &mut w.edge),
