@@ -250,8 +250,8 @@ pub struct TrackOptions {
     /// accuracy benchmark's three noise seeds, with a person-free lead-in and
     /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
     /// PA-MPJPE, model IoU and lost frames (README, "The second pass"), at under
-    /// half the speed (a median 7.8 against 21.3 frames/s with a lead-in), below
-    /// the 10 frames/s the default keeps. Frames are reported once their block's
+    /// half the speed (a median 7.8 against 16.5 frames/s with a lead-in, on the
+    /// same machine), below the 10 frames/s the default keeps. Frames are reported once their block's
     /// second pass is done (a block at a time), and a block's targets are held
     /// until then.
     pub two_way: bool,
@@ -847,8 +847,9 @@ impl Tracker {
     /// Each initial candidate tracked over the frames after `init` (then, when there
     /// are too few, the ones before it), each with its own history, under the
     /// paper's objective: their summed costs, for [`choose_hypothesis`], and the
-    /// evaluations spent. `targets` holds every frame's target up to the last one
-    /// probed (None without a person).
+    /// evaluations spent. `targets` holds the targets of frames `from`, `from` + 1,
+    /// … up to the last one probed (None without a person); `init` counts from
+    /// `from`.
     fn probe_candidates(
         &self,
         body: &Body,
