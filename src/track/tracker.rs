@@ -251,9 +251,9 @@ pub struct TrackOptions {
     /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
     /// PA-MPJPE, model IoU and lost frames (README, "The second pass"), at under
     /// half the speed (a median 7.8 against 16.5 frames/s with a lead-in, on the
-    /// same machine), below the 10 frames/s the default keeps. Frames are reported once their block's
-    /// second pass is done (a block at a time), and a block's targets are held
-    /// until then.
+    /// same machine), below the 10 frames/s the default keeps. Frames are reported
+    /// once their block's second pass is done (a block at a time), and a block's
+    /// targets are held until then.
     pub two_way: bool,
     /// The initial frame (None: chosen automatically).
     pub init_frame: Option<usize>,
@@ -614,16 +614,8 @@ impl Tracker {
                 _ => chosen,
             }
         };
-        // A keyframe on the initial frame overrides what initialisation found.
-        let mut search = Search::new(self, &body, f64::NEG_INFINITY);
-        let mut init_pose = init_pose;
-        let init_key = self.opts.keyframes.at(init).is_some();
-        if init_key {
-            let mut history = History::new(init_pose);
-            init_pose = search.step(init, Some(init_target), &mut history).pose;
-        }
-        let ground = sole_height(&body, &body.posed(&init_pose));
-        search.ground = ground;
+        let (mut search, init_frame) = self.start_on(&body, init, init_target, init_pose);
+        let (ground, init_pose) = (search.ground, init_frame.pose);
         let mut results: Vec<Option<TrackedFrame>> = vec![None; init + 1];
         let mut done = 0usize;
         let mut emit =
@@ -640,15 +632,7 @@ impl Tracker {
                     ControlFlow::Break(()) => Err(TrackError::Canceled),
                 }
             };
-        let (cost, iou) = search.measure(init_target, &init_pose);
-        results[init] = Some(TrackedFrame {
-            index: init,
-            person: true,
-            pose: init_pose,
-            cost: Some(cost),
-            iou: Some(iou),
-            keyframe: init_key,
-        });
+        results[init] = Some(init_frame);
         timing.search += t0.elapsed().as_secs_f64();
 
         // Phases 3 and 4 hand each tracked frame to the smoothed refit, which hands
@@ -773,6 +757,36 @@ impl Tracker {
         self.check_stop().is_err()
     }
 
+    /// The search that tracks on from the initial frame `index`, and that frame's
+    /// result: `pose`, or a keyframe's on that frame, which overrides what
+    /// initialisation found; the ground under its soles.
+    fn start_on<'a>(
+        &'a self,
+        body: &'a Body,
+        index: usize,
+        target: &Target,
+        pose: Pose,
+    ) -> (Search<'a>, TrackedFrame) {
+        let mut search = Search::new(self, body, f64::NEG_INFINITY);
+        let mut pose = pose;
+        let keyframe = self.opts.keyframes.at(index).is_some();
+        if keyframe {
+            let mut history = History::new(pose);
+            pose = search.step(index, Some(target), &mut history).pose;
+        }
+        search.ground = sole_height(body, &body.posed(&pose));
+        let (cost, iou) = search.measure(target, &pose);
+        let frame = TrackedFrame {
+            index,
+            person: true,
+            pose,
+            cost: Some(cost),
+            iou: Some(iou),
+            keyframe,
+        };
+        (search, frame)
+    }
+
     /// The second pass over one block of frames ([`TrackOptions::two_way`]; the
     /// targets of frames `from`, `from` + 1, …): initialised afresh on the block's
     /// last frame with a person, with the clip's shape, its candidates chosen as the
@@ -796,7 +810,7 @@ impl Tracker {
             self.initialise_with(paper.as_ref().unwrap_or(init_target), Some(shape));
         self.check_stop()?;
         let mut evals = 0;
-        let mut init_pose = if candidates.len() == 1 {
+        let init_pose = if candidates.len() == 1 {
             candidates[0]
         } else {
             let refs: Vec<Option<&Target>> = targets.iter().map(Option::as_ref).collect();
@@ -804,26 +818,10 @@ impl Tracker {
             evals += e;
             choose_hypothesis(&totals, &self.camera)
         };
-        let mut search = Search::new(self, body, f64::NEG_INFINITY);
-        let init_key = self.opts.keyframes.at(from + last).is_some();
-        if init_key {
-            let mut history = History::new(init_pose);
-            init_pose = search
-                .step(from + last, Some(init_target), &mut history)
-                .pose;
-        }
-        let ground = sole_height(body, &body.posed(&init_pose));
-        search.ground = ground;
-        let (cost, iou) = search.measure(init_target, &init_pose);
+        let (mut search, init_frame) = self.start_on(body, from + last, init_target, init_pose);
+        let (ground, init_pose) = (search.ground, init_frame.pose);
         let mut frames = vec![None; last + 1];
-        frames[last] = Some(TrackedFrame {
-            index: from + last,
-            person: true,
-            pose: init_pose,
-            cost: Some(cost),
-            iou: Some(iou),
-            keyframe: init_key,
-        });
+        frames[last] = Some(init_frame);
         let mut history = History::new(init_pose);
         for i in (0..last).rev() {
             self.check_stop()?;
@@ -1325,11 +1323,8 @@ impl TwoWay {
     fn merge(&mut self, frames: Vec<TrackedFrame>) -> Vec<TrackedFrame> {
         self.held.extend(frames);
         let mut out = Vec::new();
-        while let Some(first) = self.held.pop_front() {
-            if first.index >= self.ready_to {
-                self.held.push_front(first);
-                break;
-            }
+        while self.held.front().is_some_and(|f| f.index < self.ready_to) {
+            let first = self.held.pop_front().expect("a frame held");
             while self.back.front().is_some_and(|b| b.index < first.index) {
                 self.back.pop_front();
             }
