@@ -776,12 +776,19 @@ fn the_smoothed_refit_searches_every_frame_again() {
     assert!(iou_on > iou_off - 0.02, "IoU {iou_off:.3} -> {iou_on:.3}");
 }
 
-/// Features computed on helper threads ahead of the search, and the
-/// initialisation's fits side by side, change nothing: the same poses, shape and
-/// costs, and the same progress reports, as on the caller's thread alone; a bad
-/// frame in the middle is reported as such, after the frames before it.
+/// Features computed on helper threads ahead of the search, the initialisation's
+/// fits side by side, and the second pass running beside the first, change
+/// nothing: the same poses, shape and costs, and the same progress reports, as on
+/// the caller's thread alone; a bad frame in the middle is reported as such, after
+/// the frames before it.
 #[test]
 fn helper_threads_track_exactly_as_one_thread() {
+    for two_way in [false, true] {
+        helper_threads_track_as_one(two_way);
+    }
+}
+
+fn helper_threads_track_as_one(two_way: bool) {
     let (frames, opts) = run_colour_inputs();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let run = |threads: usize, frames: Vec<FrameInput>| {
@@ -791,6 +798,7 @@ fn helper_threads_track_exactly_as_one_thread() {
                 threads,
                 // Initialise after 8 frames, so that the rest is streamed.
                 init_window: 8,
+                two_way,
                 ..TrackOptions::default()
             },
         );
@@ -818,10 +826,12 @@ fn helper_threads_track_exactly_as_one_thread() {
     for threads in [2, 3] {
         let (many, many_reported) = run(threads, copy(&frames));
         let many = many.unwrap();
-        assert_eq!(many.shape, one.shape, "{threads} threads: shape");
-        assert_eq!(many.init_frame, one.init_frame, "{threads} threads");
-        assert_eq!(many.frames, one.frames, "{threads} threads: frames");
-        assert_eq!(many_reported, one_reported, "{threads} threads: reports");
+        let case = format!("{threads} threads, second pass {two_way}");
+        assert_eq!(many.shape, one.shape, "{case}: shape");
+        assert_eq!(many.init_frame, one.init_frame, "{case}");
+        assert_eq!(many.frames, one.frames, "{case}: frames");
+        assert_eq!(many.timing.evals, one.timing.evals, "{case}: evaluations");
+        assert_eq!(many_reported, one_reported, "{case}: reports");
     }
 
     // Frame 14 of another size: the frames before it are tracked and reported, then
@@ -847,6 +857,7 @@ fn helper_threads_track_exactly_as_one_thread() {
         TrackOptions {
             threads: 3,
             init_window: 8,
+            two_way,
             ..TrackOptions::default()
         },
     );

@@ -34,7 +34,10 @@
 
 use std::collections::VecDeque;
 use std::ops::ControlFlow;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::mpsc::{channel, sync_channel, Receiver, SyncSender};
+use std::sync::Arc;
+use std::thread::{Scope, ScopedJoinHandle};
 use std::time::Instant;
 
 use image::RgbImage;
@@ -637,37 +640,45 @@ impl Tracker {
 
         // Phases 3 and 4 hand each tracked frame to the smoothed refit, which hands
         // the frames back in order once their neighbours are known (at once when it
-        // is off); a frame is reported when it comes back.
+        // is off); a frame is reported when it comes back. With the second pass,
+        // each block's targets are all read before the first pass searches its
+        // frames, and the second pass runs on the block meanwhile, on a thread of
+        // its own (see [`TwoWay`]).
         let mut out: Vec<TrackedFrame> = Vec::new();
+        let mut targets: Vec<Option<Arc<Target>>> = pending
+            .into_iter()
+            .map(|p| p.target.map(Arc::new))
+            .collect();
         std::thread::scope(|scope| -> Result<(), TrackError> {
             let mut refit = Refit::start(scope, self, &body, ground);
+            let pass = Pass {
+                scope,
+                tracker: self,
+                body: &body,
+                shape,
+            };
             let mut two_way = TwoWay::new(
                 self.opts.two_way,
                 self.opts.initial.is_some().then_some(init),
             );
             let mut take =
                 |refit: &mut Refit, two_way: &mut TwoWay, end: bool| -> Result<(), TrackError> {
+                    two_way.poll()?;
                     for f in two_way.merge(refit.finished(end)) {
                         out.push(emit(f, &mut done)?);
                     }
                     Ok(())
                 };
-            // Hands a tracked frame to the refit (its target too, unless
-            // `refit_target` is false) and the target to the second pass, which
-            // runs on each block as soon as it is whole.
-            let push = |refit: &mut Refit,
-                        two_way: &mut TwoWay,
-                        frame: TrackedFrame,
-                        target: Option<Target>,
-                        refit_target: bool|
-             -> Result<(), TrackError> {
-                let block = two_way.keep(target.as_ref());
-                refit.push(frame, target.filter(|_| refit_target));
-                if let Some((from, targets)) = block {
-                    two_way.run(self, &body, shape, from, targets)?;
-                }
-                Ok(())
-            };
+            // Frames read but not yet searched (an input's failure in its place).
+            let mut queue = Queue::new();
+            let mut input_done = exhausted;
+            let mut read = || next_target(&mut prev_features, &mut timing, skin.as_ref());
+            for target in &targets {
+                two_way.gather(&pass, target.as_ref())?;
+            }
+            if exhausted {
+                two_way.end_input(&pass)?;
+            }
 
             // Phase 3: backwards from the initial frame, then forwards over the buffer.
             let mut searched = 0.0;
@@ -680,44 +691,55 @@ impl Tracker {
                 searched += t0.elapsed().as_secs_f64();
                 Ok::<_, TrackError>(f)
             };
+            while !input_done && two_way.waits_for(init) {
+                input_done = !two_way.enqueue(&pass, read(), &mut queue)?;
+            }
             let mut history = History::new(init_pose);
             for i in (0..init).rev() {
-                results[i] = Some(step(i, pending[i].target.as_ref(), &mut history)?);
+                results[i] = Some(step(i, targets[i].as_deref(), &mut history)?);
             }
-            let mut targets: Vec<Option<Target>> = pending.into_iter().map(|p| p.target).collect();
             for (i, (result, target)) in results.iter_mut().zip(&mut targets).enumerate() {
                 // A given initial pose is kept on its frame, as a keyframe's is.
                 let given = i == init && self.opts.initial.is_some();
                 let frame = result.take().expect("tracked");
-                push(&mut refit, &mut two_way, frame, target.take(), !given)?;
+                refit.push(frame, target.take().filter(|_| !given));
             }
             take(&mut refit, &mut two_way, false)?;
-            let mut history = History::new(init_pose);
-            for (i, target) in targets.iter_mut().enumerate().skip(init + 1) {
-                let f = step(i, target.as_ref(), &mut history)?;
-                push(&mut refit, &mut two_way, f, target.take(), true)?;
-                take(&mut refit, &mut two_way, false)?;
-            }
-            drop(targets);
 
-            // Phase 4: stream the rest.
-            while let Some(next) = next_target(&mut prev_features, &mut timing, skin.as_ref()) {
-                let (i, target, _) = match next {
+            // Phase 4: forwards over the rest of the buffer, then the stream.
+            let read_ahead = std::mem::take(&mut queue);
+            queue.extend(targets.into_iter().enumerate().skip(init + 1).map(Ok));
+            queue.extend(read_ahead);
+            let mut history = History::new(init_pose);
+            loop {
+                // The next frame, with the second pass, once its block is whole.
+                while !input_done
+                    && queue.front().map_or(true, |next| match next {
+                        Ok((i, _)) => two_way.waits_for(*i),
+                        Err(_) => false,
+                    })
+                {
+                    input_done = !two_way.enqueue(&pass, read(), &mut queue)?;
+                }
+                let Some(next) = queue.pop_front() else {
+                    break;
+                };
+                let (i, target) = match next {
                     Ok(next) => next,
                     Err(e) => {
                         // The frames tracked before a bad one are reported first
                         // (as the first pass left them).
-                        two_way.abandon();
+                        two_way.abandon()?;
                         take(&mut refit, &mut two_way, true)?;
                         return Err(e);
                     }
                 };
-                let f = step(i, target.as_ref(), &mut history)?;
-                push(&mut refit, &mut two_way, f, target, true)?;
+                let f = step(i, target.as_deref(), &mut history)?;
+                refit.push(f, target);
                 take(&mut refit, &mut two_way, false)?;
             }
             // The last block's second pass, while the helper refits the last frames.
-            two_way.finish(self, &body, shape)?;
+            two_way.finish(&pass)?;
             take(&mut refit, &mut two_way, true)?;
             timing.search += searched + refit.here_secs + two_way.secs;
             timing.evals += refit.evals + two_way.evals;
@@ -792,28 +814,34 @@ impl Tracker {
     /// last frame with a person, with the clip's shape, its candidates chosen as the
     /// first pass's are, tracked backwards to the block's first frame and refitted.
     /// Its frames up to that last one with a person (none when the block has no
-    /// person), and the evaluations spent.
+    /// person), and the evaluations spent. Gives up ([`TrackError::Canceled`]) once
+    /// `abort` is set, as on a stop.
     fn backward_block(
         &self,
         body: &Body,
         shape: ShapeValues,
         from: usize,
-        mut targets: Vec<Option<Target>>,
+        mut targets: Vec<Option<Arc<Target>>>,
+        abort: &AtomicBool,
     ) -> Result<(Vec<TrackedFrame>, u64), TrackError> {
+        let check = || match abort.load(Ordering::Relaxed) {
+            true => Err(TrackError::Canceled),
+            false => self.check_stop(),
+        };
         let Some(last) = targets.iter().rposition(Option::is_some) else {
             return Ok((Vec::new(), 0));
         };
         targets.truncate(last + 1);
-        let init_target = targets[last].as_ref().expect("a person frame");
+        let init_target = targets[last].as_deref().expect("a person frame");
         let paper = init_target.paper();
         let (_, candidates) =
             self.initialise_with(paper.as_ref().unwrap_or(init_target), Some(shape));
-        self.check_stop()?;
+        check()?;
         let mut evals = 0;
         let init_pose = if candidates.len() == 1 {
             candidates[0]
         } else {
-            let refs: Vec<Option<&Target>> = targets.iter().map(Option::as_ref).collect();
+            let refs: Vec<Option<&Target>> = targets.iter().map(Option::as_deref).collect();
             let (totals, e) = self.probe_candidates(body, &candidates, &refs, from, last)?;
             evals += e;
             choose_hypothesis(&totals, &self.camera)
@@ -824,21 +852,36 @@ impl Tracker {
         frames[last] = Some(init_frame);
         let mut history = History::new(init_pose);
         for i in (0..last).rev() {
-            self.check_stop()?;
-            frames[i] = Some(search.step(from + i, targets[i].as_ref(), &mut history));
+            check()?;
+            frames[i] = Some(search.step(from + i, targets[i].as_deref(), &mut history));
         }
         evals += search.evals;
-        let out = std::thread::scope(|scope| {
-            let mut refit = Refit::start(scope, self, body, ground);
-            let mut out = Vec::with_capacity(last + 1);
-            for (f, t) in frames.into_iter().zip(targets) {
-                refit.push(f.expect("tracked"), t);
-                out.extend(refit.finished(false));
-            }
-            out.extend(refit.finished(true));
-            evals += refit.evals;
-            out
+        // The refit: every frame's neighbours are known, so its frames are
+        // refitted side by side (each exactly as one thread would).
+        let mut window = Window::new(self.opts.refit_sigma);
+        for (f, t) in frames.into_iter().zip(targets) {
+            window.push(f.expect("tracked"), t);
+        }
+        let jobs: Vec<Job<Arc<Target>>> = std::iter::from_fn(|| window.next(true)).collect();
+        let threads = self.threads().min(jobs.len()).max(1);
+        let shares: Vec<usize> = (0..threads).collect();
+        let mut refitted: Vec<_> = par_map(&shares, threads, |&t| {
+            let search = Search::new(self, body, ground);
+            let mine = jobs.iter().skip(t).step_by(threads);
+            mine.map(|job| match check() {
+                Ok(()) => search.refit(job),
+                Err(_) => (job.frame.clone(), 0),
+            })
+            .collect::<Vec<_>>()
+            .into_iter()
         });
+        check()?;
+        let mut out = Vec::with_capacity(jobs.len());
+        for i in 0..jobs.len() {
+            let (f, e) = refitted[i % threads].next().expect("a refitted frame");
+            evals += e;
+            out.push(f);
+        }
         Ok((out, evals))
     }
 
@@ -1100,7 +1143,7 @@ fn init_score(f: &FrameFeatures) -> f64 {
 /// otherwise, and for the last frames of the clip, while the helper finishes the
 /// ones before them). Frames come back in order.
 struct Refit<'a> {
-    window: Window<Target>,
+    window: Window<Arc<Target>>,
     here: Search<'a>,
     helper: Option<RefitHelper>,
     /// Frames refitted on the helper thread, in order, not yet collected.
@@ -1112,7 +1155,7 @@ struct Refit<'a> {
 
 struct RefitHelper {
     /// None once the last frame was sent (the helper then ends).
-    jobs: Option<SyncSender<Job<Target>>>,
+    jobs: Option<SyncSender<Job<Arc<Target>>>>,
     results: Receiver<(TrackedFrame, u64)>,
     /// Jobs sent and not yet received.
     out: usize,
@@ -1127,14 +1170,14 @@ impl<'a> Refit<'a> {
     ) -> Refit<'a> {
         let mut helper = None;
         if tracker.threads() > 1 && tracker.opts.refit_sigma > 0.0 {
-            let (job_tx, job_rx) = sync_channel::<Job<Target>>(REFIT_QUEUE);
+            let (job_tx, job_rx) = sync_channel::<Job<Arc<Target>>>(REFIT_QUEUE);
             let (out_tx, out_rx) = channel();
             let spawned = std::thread::Builder::new()
                 .name("monocap-refit".into())
                 .spawn_scoped(scope, move || {
                     let search = Search::new(tracker, body, ground);
                     for job in job_rx {
-                        if out_tx.send(search.refit(job)).is_err() {
+                        if out_tx.send(search.refit(&job)).is_err() {
                             break;
                         }
                     }
@@ -1159,7 +1202,7 @@ impl<'a> Refit<'a> {
     }
 
     /// Adds the next frame in index order (its target, None without a person).
-    fn push(&mut self, frame: TrackedFrame, target: Option<Target>) {
+    fn push(&mut self, frame: TrackedFrame, target: Option<Arc<Target>>) {
         self.window.push(frame, target);
     }
 
@@ -1183,7 +1226,7 @@ impl<'a> Refit<'a> {
                 }
                 _ => {
                     let t0 = Instant::now();
-                    let (f, evals) = self.here.refit(job);
+                    let (f, evals) = self.here.refit(&job);
                     self.here_secs += t0.elapsed().as_secs_f64();
                     self.evals += evals;
                     mine.push(f);
@@ -1222,15 +1265,43 @@ impl<'a> Refit<'a> {
     }
 }
 
-/// The second pass's bookkeeping ([`TrackOptions::two_way`]): a copy of each
-/// target of the block being gathered, and the first pass's frames, held until
-/// their block's second pass is done; then each frame takes the cheaper answer.
-struct TwoWay {
+/// What the second pass runs with: the tracker, the clip's body and shape, and the
+/// scope its threads run in.
+struct Pass<'scope, 'env> {
+    scope: &'scope Scope<'scope, 'env>,
+    tracker: &'env Tracker,
+    body: &'env Body,
+    shape: ShapeValues,
+}
+
+/// Frames read and not yet searched by the first pass, with their targets (an
+/// input's failure in its place).
+type Queue = VecDeque<Result<(usize, Option<Arc<Target>>), TrackError>>;
+
+/// A block's second pass: its frames and the evaluations spent.
+type BlockResult = Result<(Vec<TrackedFrame>, u64), TrackError>;
+
+/// The second pass's bookkeeping ([`TrackOptions::two_way`]): each target of the
+/// block being gathered (shared with the first pass, which reads a whole block
+/// before it searches its frames), the block whose second pass is running, and
+/// the first pass's frames, held until their block's second pass is done; then
+/// each frame takes the cheaper answer.
+///
+/// With more than one thread, a block's second pass runs on a helper thread while
+/// the first pass searches the same frames; at most one block at a time, so the
+/// targets of two blocks at most are held. Each pass depends only on the targets,
+/// the clip's shape and the options, so the result is the same on any number of
+/// threads.
+struct TwoWay<'scope> {
     /// Frames per block; 0 when there is no second pass.
     block: usize,
     /// The first frame of the block being gathered, and its targets so far.
     from: usize,
-    kept: Vec<Option<Target>>,
+    kept: Vec<Option<Arc<Target>>>,
+    /// The block whose second pass runs on a helper thread: its end and thread.
+    running: Option<(usize, ScopedJoinHandle<'scope, BlockResult>)>,
+    /// Set when the track ends early: the helper then gives up.
+    abort: Arc<AtomicBool>,
     /// The second pass's frames not yet merged, in order.
     back: VecDeque<TrackedFrame>,
     /// The first pass's frames (refitted) waiting for their block's second pass.
@@ -1240,15 +1311,19 @@ struct TwoWay {
     /// A frame whose first answer stands (the given initial pose).
     keep_first: Option<usize>,
     evals: u64,
+    /// Seconds the first pass's thread spent on the second pass (running it, or
+    /// waiting for its helper).
     secs: f64,
 }
 
-impl TwoWay {
-    fn new(on: bool, keep_first: Option<usize>) -> TwoWay {
+impl<'scope> TwoWay<'scope> {
+    fn new(on: bool, keep_first: Option<usize>) -> TwoWay<'scope> {
         TwoWay {
             block: if on { TWO_WAY_BLOCK } else { 0 },
             from: 0,
             kept: Vec::new(),
+            running: None,
+            abort: Arc::new(AtomicBool::new(false)),
             back: VecDeque::new(),
             held: VecDeque::new(),
             ready_to: if on { 0 } else { usize::MAX },
@@ -1258,9 +1333,9 @@ impl TwoWay {
         }
     }
 
-    /// Keeps a copy of the next frame's target: the block (its first frame and
-    /// targets) when this frame completes it.
-    fn keep(&mut self, target: Option<&Target>) -> Option<(usize, Vec<Option<Target>>)> {
+    /// Keeps the next frame's target: the block (its first frame and targets) when
+    /// this frame completes it.
+    fn keep(&mut self, target: Option<&Arc<Target>>) -> Option<(usize, Vec<Option<Arc<Target>>>)> {
         if self.block == 0 {
             return None;
         }
@@ -1273,21 +1348,122 @@ impl TwoWay {
         Some((from, std::mem::take(&mut self.kept)))
     }
 
-    /// The second pass over a whole block.
-    fn run(
+    /// Whether frame `index` (read or not) lies in a block not yet handed to the
+    /// second pass.
+    fn waits_for(&self, index: usize) -> bool {
+        self.block > 0 && index >= self.from
+    }
+
+    /// Keeps the next frame's target, and starts the second pass on its block when
+    /// this frame completes it.
+    fn gather(
         &mut self,
-        tracker: &Tracker,
-        body: &Body,
-        shape: ShapeValues,
-        from: usize,
-        targets: Vec<Option<Target>>,
+        pass: &Pass<'scope, '_>,
+        target: Option<&Arc<Target>>,
     ) -> Result<(), TrackError> {
+        match self.keep(target) {
+            Some((from, targets)) => self.start(pass, from, targets),
+            None => Ok(()),
+        }
+    }
+
+    /// The input has ended: the second pass starts on the last block, however short.
+    fn end_input(&mut self, pass: &Pass<'scope, '_>) -> Result<(), TrackError> {
+        if self.kept.is_empty() {
+            return Ok(());
+        }
+        let from = self.from;
+        let targets = std::mem::take(&mut self.kept);
+        self.from += targets.len();
+        self.start(pass, from, targets)
+    }
+
+    /// Puts the next input frame (None: the input has ended) at the end of the first
+    /// pass's `queue`, and its target in the block; false once the input has ended.
+    fn enqueue(
+        &mut self,
+        pass: &Pass<'scope, '_>,
+        next: Option<Result<(usize, Option<Target>, f64), TrackError>>,
+        queue: &mut Queue,
+    ) -> Result<bool, TrackError> {
+        match next {
+            None => {
+                self.end_input(pass)?;
+                Ok(false)
+            }
+            Some(Err(e)) => {
+                queue.push_back(Err(e));
+                Ok(false)
+            }
+            Some(Ok((i, target, _))) => {
+                let target = target.map(Arc::new);
+                self.gather(pass, target.as_ref())?;
+                queue.push_back(Ok((i, target)));
+                Ok(true)
+            }
+        }
+    }
+
+    /// Starts the second pass over a whole block, once the one before it is done:
+    /// on a helper thread, or here with one thread (or when none can be started).
+    fn start(
+        &mut self,
+        pass: &Pass<'scope, '_>,
+        from: usize,
+        targets: Vec<Option<Arc<Target>>>,
+    ) -> Result<(), TrackError> {
+        self.wait()?;
+        let end = from + targets.len();
+        let &Pass {
+            tracker,
+            body,
+            shape,
+            ..
+        } = pass;
+        if tracker.threads() > 1 {
+            let abort = Arc::clone(&self.abort);
+            let targets = targets.clone();
+            let spawned = std::thread::Builder::new()
+                .name("monocap-second-pass".into())
+                .spawn_scoped(pass.scope, move || {
+                    tracker.backward_block(body, shape, from, targets, &abort)
+                });
+            if let Ok(handle) = spawned {
+                self.running = Some((end, handle));
+                return Ok(());
+            }
+        }
         let t0 = Instant::now();
-        let len = targets.len();
-        let (frames, evals) = tracker.backward_block(body, shape, from, targets)?;
-        self.accept(from + len, frames);
-        self.evals += evals;
+        let result = tracker.backward_block(body, shape, from, targets, &self.abort);
         self.secs += t0.elapsed().as_secs_f64();
+        self.done(end, result)
+    }
+
+    /// Takes the running block's second pass when it has finished, without waiting.
+    fn poll(&mut self) -> Result<(), TrackError> {
+        match &self.running {
+            Some((_, h)) if h.is_finished() => self.wait(),
+            _ => Ok(()),
+        }
+    }
+
+    /// Waits for the running block's second pass, if any, and takes it.
+    fn wait(&mut self) -> Result<(), TrackError> {
+        let Some((end, handle)) = self.running.take() else {
+            return Ok(());
+        };
+        let t0 = Instant::now();
+        let result = handle
+            .join()
+            .unwrap_or_else(|e| std::panic::resume_unwind(e));
+        self.secs += t0.elapsed().as_secs_f64();
+        self.done(end, result)
+    }
+
+    fn done(&mut self, end: usize, result: BlockResult) -> Result<(), TrackError> {
+        let (frames, evals) = result?;
+        self.evals += evals;
+        self.accept(end, frames);
         Ok(())
     }
 
@@ -1297,25 +1473,22 @@ impl TwoWay {
         self.ready_to = end;
     }
 
-    /// The second pass over the last block, however short; every frame is ready.
-    fn finish(
-        &mut self,
-        tracker: &Tracker,
-        body: &Body,
-        shape: ShapeValues,
-    ) -> Result<(), TrackError> {
-        if !self.kept.is_empty() {
-            let targets = std::mem::take(&mut self.kept);
-            self.run(tracker, body, shape, self.from, targets)?;
-        }
+    /// The last block's second pass (started when the input ended) is done; every
+    /// frame is ready.
+    fn finish(&mut self, pass: &Pass<'scope, '_>) -> Result<(), TrackError> {
+        self.end_input(pass)?;
+        self.wait()?;
         self.ready_to = usize::MAX;
         Ok(())
     }
 
-    /// No more second passes: the frames held go out as the first pass left them.
-    fn abandon(&mut self) {
+    /// No more second passes after the one running: the frames held after its block
+    /// go out as the first pass left them.
+    fn abandon(&mut self) -> Result<(), TrackError> {
         self.kept.clear();
+        self.wait()?;
         self.ready_to = usize::MAX;
+        Ok(())
     }
 
     /// Takes the first pass's next frames (in order): those whose block's second
@@ -1341,6 +1514,14 @@ impl TwoWay {
             });
         }
         out
+    }
+}
+
+impl Drop for TwoWay<'_> {
+    /// A track that ends early (an error, a stop) ends the helper's pass too; the
+    /// scope it runs in waits for it.
+    fn drop(&mut self) {
+        self.abort.store(true, Ordering::Relaxed);
     }
 }
 
@@ -1582,13 +1763,14 @@ impl<'a> Search<'a> {
     /// each parameter within its reach) from the job's start; its answer replaces
     /// the frame's unless its cost is not finite (below the ground). The frame, and
     /// the evaluations spent.
-    fn refit(&self, job: Job<Target>) -> (TrackedFrame, u64) {
+    fn refit(&self, job: &Job<Arc<Target>>) -> (TrackedFrame, u64) {
         let Job {
             frame,
             target,
             start,
         } = job;
-        let (Some(target), Some(start)) = (target.as_ref(), start) else {
+        let frame = frame.clone();
+        let (Some(target), &Some(start)) = (target.as_deref(), start) else {
             return (frame, 0);
         };
         let opts = &self.tracker.opts;
