@@ -180,7 +180,7 @@ impl WeightArgs {
 struct RefitArgs {
     /// The second pass: each block of 150 frames tracked again backwards from its
     /// end, initialised afresh, a frame taking that answer where it costs at least
-    /// 30% less. More accurate, under half the speed; frames come a block at a time.
+    /// 30% less. More accurate, slower.
     #[arg(long)]
     two_way: bool,
     /// The smoothed refit: each frame searched again from the Gaussian average of

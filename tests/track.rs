@@ -14,7 +14,7 @@ use monocap::motion::bvh::Bvh;
 use monocap::motion::json::MotionJson;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
 use monocap::track::metrics;
-use monocap::track::tracker::{FrameInput, TrackOptions, Tracker};
+use monocap::track::tracker::{FrameInput, TrackOptions, TrackedFrame, Tracker};
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
 
@@ -803,11 +803,36 @@ fn helper_threads_track_as_one(two_way: bool) {
             },
         );
         let n = frames.len();
-        let mut reported = Vec::new();
-        let track = tracker.track(frames.into_iter().map(Ok), Some(n), |f, _| {
-            reported.push(f.index);
+        let mut reports = Vec::new();
+        let track = tracker.track(frames.into_iter().map(Ok), Some(n), |f, p| {
+            reports.push((f.clone(), p.revised));
             ControlFlow::Continue(())
         });
+        // Each frame is reported once, in order, then maybe revised (the second
+        // pass, once its block is done): the frames first reported, and the last
+        // report of each frame.
+        let mut reported = Vec::new();
+        let mut last: Vec<TrackedFrame> = Vec::new();
+        for (f, revised) in reports {
+            if revised {
+                assert!(
+                    f.index < last.len(),
+                    "frame {} revised before it came",
+                    f.index
+                );
+                let i = f.index;
+                last[i] = f;
+            } else {
+                reported.push(f.index);
+                last.push(f);
+            }
+        }
+        if let Ok(track) = &track {
+            for (r, f) in last.iter().zip(&track.frames) {
+                assert_eq!((r.index, r.person, r.cost), (f.index, f.person, f.cost));
+                assert!(!f.person || r.pose == f.pose, "frame {}", f.index);
+            }
+        }
         (track, reported)
     };
     let copy = |frames: &[FrameInput]| -> Vec<FrameInput> {
@@ -821,7 +846,7 @@ fn helper_threads_track_as_one(two_way: bool) {
     };
     let (one, one_reported) = run(1, copy(&frames));
     let one = one.unwrap();
-    // Every frame reported once, in order, with its final result.
+    // Every frame reported once, in order, and its last report its final result.
     assert_eq!(one_reported, (0..frames.len()).collect::<Vec<_>>());
     for threads in [2, 3] {
         let (many, many_reported) = run(threads, copy(&frames));

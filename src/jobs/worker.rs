@@ -406,6 +406,7 @@ impl Jobs {
                             "cost": f.cost,
                             "iou": f.iou,
                             "fps": p.fps,
+                            "revised": p.revised,
                         }),
                     );
                     metrics::counter!("monocap_frames_tracked_total").increment(1);

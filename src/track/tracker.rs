@@ -11,9 +11,11 @@
 //!   the first [`MAX_INIT_FRAME`] frames;
 //! - after that, only the previous frame's features (temporal coherence of the
 //!   extremity candidates) and one pose per frame;
-//! - with the second pass ([`TrackOptions::two_way`]), a copy of each target of
-//!   the block of [`TWO_WAY_BLOCK`] frames being gathered, and the frames of a
-//!   block until its second pass is done.
+//! - with the second pass ([`TrackOptions::two_way`]), the targets of the block
+//!   of [`TWO_WAY_BLOCK`] frames being read (the first pass reads a whole block
+//!   before it searches its frames) and of the block whose second pass is running:
+//!   two blocks at most; and the first pass's answers until their block's second
+//!   pass is done.
 //!
 //! Per frame: the search starts at the previous solution moved by the parameter
 //! velocity (when that is not worse than the previous solution itself; and moved
@@ -74,7 +76,7 @@ const HYPOTHESIS_FRAMES: usize = 15;
 const FACING_TIE: f64 = 0.02;
 
 /// Frames in a block of the second pass ([`TrackOptions::two_way`]): its targets
-/// are held (about 5 bytes a pixel each) until the block is whole.
+/// are held (about 5 bytes a pixel each) until its second pass is done.
 pub const TWO_WAY_BLOCK: usize = 150;
 
 /// A frame takes the second pass's answer where it costs at least this fraction
@@ -255,8 +257,9 @@ pub struct TrackOptions {
     /// PA-MPJPE, model IoU and lost frames (README, "The second pass"), at under
     /// half the speed (a median 7.8 against 16.5 frames/s with a lead-in, on the
     /// same machine), below the 10 frames/s the default keeps. Frames are reported
-    /// once their block's second pass is done (a block at a time), and a block's
-    /// targets are held until then.
+    /// as the first pass leaves them, and a frame whose answer the second pass
+    /// replaces is reported again once its block is done ([`Progress::revised`]); a
+    /// block's targets are held until then.
     pub two_way: bool,
     /// The initial frame (None: chosen automatically).
     pub init_frame: Option<usize>,
@@ -344,6 +347,10 @@ pub struct Progress {
     pub frames_total: Option<usize>,
     /// Frames per second since tracking began.
     pub fps: f64,
+    /// This report revises a frame reported before: the second pass
+    /// ([`TrackOptions::two_way`]) found a clearly cheaper answer for it.
+    /// `frames_done` counts each frame once, on its first report.
+    pub revised: bool,
 }
 
 /// Where the time went (seconds).
@@ -621,20 +628,25 @@ impl Tracker {
         let (ground, init_pose) = (search.ground, init_frame.pose);
         let mut results: Vec<Option<TrackedFrame>> = vec![None; init + 1];
         let mut done = 0usize;
-        let mut emit =
-            |frame: TrackedFrame, done: &mut usize| -> Result<TrackedFrame, TrackError> {
+        let mut emit = |frame: TrackedFrame,
+                        done: &mut usize,
+                        revised: bool|
+         -> Result<TrackedFrame, TrackError> {
+            if !revised {
                 *done += 1;
-                let secs = started.elapsed().as_secs_f64();
-                let progress = Progress {
-                    frames_done: *done,
-                    frames_total: total,
-                    fps: if secs > 0.0 { *done as f64 / secs } else { 0.0 },
-                };
-                match on_frame(&frame, &progress) {
-                    ControlFlow::Continue(()) => Ok(frame),
-                    ControlFlow::Break(()) => Err(TrackError::Canceled),
-                }
+            }
+            let secs = started.elapsed().as_secs_f64();
+            let progress = Progress {
+                frames_done: *done,
+                frames_total: total,
+                fps: if secs > 0.0 { *done as f64 / secs } else { 0.0 },
+                revised,
             };
+            match on_frame(&frame, &progress) {
+                ControlFlow::Continue(()) => Ok(frame),
+                ControlFlow::Break(()) => Err(TrackError::Canceled),
+            }
+        };
         results[init] = Some(init_frame);
         timing.search += t0.elapsed().as_secs_f64();
 
@@ -664,8 +676,14 @@ impl Tracker {
             let mut take =
                 |refit: &mut Refit, two_way: &mut TwoWay, end: bool| -> Result<(), TrackError> {
                     two_way.poll()?;
-                    for f in two_way.merge(refit.finished(end)) {
-                        out.push(emit(f, &mut done)?);
+                    for (f, revised) in two_way.merge(refit.finished(end)) {
+                        if revised {
+                            // `out` holds every frame from the first on.
+                            let i = f.index;
+                            out[i] = emit(f, &mut done, true)?;
+                        } else {
+                            out.push(emit(f, &mut done, false)?);
+                        }
                     }
                     Ok(())
                 };
@@ -1284,8 +1302,9 @@ type BlockResult = Result<(Vec<TrackedFrame>, u64), TrackError>;
 /// The second pass's bookkeeping ([`TrackOptions::two_way`]): each target of the
 /// block being gathered (shared with the first pass, which reads a whole block
 /// before it searches its frames), the block whose second pass is running, and
-/// the first pass's frames, held until their block's second pass is done; then
-/// each frame takes the cheaper answer.
+/// the first pass's frames (reported as they come), held until their block's
+/// second pass is done; then each frame takes the cheaper answer, and is reported
+/// again when that is the second pass's.
 ///
 /// With more than one thread, a block's second pass runs on a helper thread while
 /// the first pass searches the same frames; at most one block at a time, so the
@@ -1304,8 +1323,9 @@ struct TwoWay<'scope> {
     abort: Arc<AtomicBool>,
     /// The second pass's frames not yet merged, in order.
     back: VecDeque<TrackedFrame>,
-    /// The first pass's frames (refitted) waiting for their block's second pass.
-    held: VecDeque<TrackedFrame>,
+    /// The first pass's frames (refitted) waiting for their block's second pass,
+    /// each with whether it has been reported.
+    held: VecDeque<(TrackedFrame, bool)>,
     /// Frames before this one have their second pass (every frame when off).
     ready_to: usize,
     /// A frame whose first answer stands (the given initial pose).
@@ -1491,13 +1511,19 @@ impl<'scope> TwoWay<'scope> {
         Ok(())
     }
 
-    /// Takes the first pass's next frames (in order): those whose block's second
-    /// pass is done, each with the answer it keeps.
-    fn merge(&mut self, frames: Vec<TrackedFrame>) -> Vec<TrackedFrame> {
-        self.held.extend(frames);
+    /// Takes the first pass's next frames (in order) and says what to report: each
+    /// frame once, at once (false), with the answer it keeps when its block's second
+    /// pass is done, and otherwise as the first pass left it; and, once that second
+    /// pass is done, again (true) each such frame whose answer it replaces.
+    fn merge(&mut self, frames: Vec<TrackedFrame>) -> Vec<(TrackedFrame, bool)> {
+        self.held.extend(frames.into_iter().map(|f| (f, false)));
         let mut out = Vec::new();
-        while self.held.front().is_some_and(|f| f.index < self.ready_to) {
-            let first = self.held.pop_front().expect("a frame held");
+        while self
+            .held
+            .front()
+            .is_some_and(|(f, _)| f.index < self.ready_to)
+        {
+            let (first, reported) = self.held.pop_front().expect("a frame held");
             while self.back.front().is_some_and(|b| b.index < first.index) {
                 self.back.pop_front();
             }
@@ -1508,10 +1534,15 @@ impl<'scope> TwoWay<'scope> {
                     .is_some_and(|c| b.person && c < a - TWO_WAY_MARGIN * a.abs()),
                 _ => false,
             };
-            out.push(match second {
-                Some(b) if better => b.clone(),
-                _ => first,
-            });
+            match second {
+                Some(b) if better => out.push((b.clone(), reported)),
+                _ if !reported => out.push((first, false)),
+                _ => {}
+            }
+        }
+        for (f, reported) in self.held.iter_mut().filter(|(_, r)| !*r) {
+            out.push((f.clone(), false));
+            *reported = true;
         }
         out
     }
@@ -2291,16 +2322,22 @@ mod tests {
         let mut off = TwoWay::new(false, None);
         assert!((0..2 * TWO_WAY_BLOCK).all(|_| off.keep(None).is_none()));
         assert!(off.kept.is_empty());
-        assert_eq!(off.merge(vec![answer(0, 10.0)]), vec![answer(0, 10.0)]);
+        assert_eq!(
+            off.merge(vec![answer(0, 10.0)]),
+            vec![(answer(0, 10.0), false)]
+        );
     }
 
     #[test]
     fn a_frame_takes_the_second_answer_only_when_clearly_cheaper() {
         let mut two = TwoWay::new(true, Some(4));
-        // Held until their block's second pass is done.
-        assert!(two
-            .merge((0..6).map(|i| answer(i, 100.0)).collect())
-            .is_empty());
+        // Reported at once, as the first pass left them, and held.
+        let first: Vec<_> = (0..6).map(|i| (answer(i, 100.0), false)).collect();
+        assert_eq!(
+            two.merge(first.iter().map(|f| f.0.clone()).collect()),
+            first
+        );
+        assert!(two.merge(Vec::new()).is_empty(), "each reported once");
         let cheaper = 100.0 * (1.0 - TWO_WAY_MARGIN);
         let second = vec![
             answer(0, cheaper - 1.0),
@@ -2314,16 +2351,19 @@ mod tests {
             answer(4, 1.0),
         ];
         two.accept(5, second);
+        // Reported again: only the frames the second pass replaces.
         let out = two.merge(Vec::new());
-        let costs: Vec<f64> = out.iter().map(|f| f.cost.unwrap()).collect();
-        assert_eq!(costs, [cheaper - 1.0, 100.0, 100.0, 100.0, 100.0]);
-        assert_eq!(out[0].pose, answer(0, 0.0).pose);
+        assert_eq!(out, vec![(answer(0, cheaper - 1.0), true)]);
+        assert_eq!(out[0].0.pose, answer(0, 0.0).pose);
         // Frame 5 waits for the next block; a first pass's negative cost too.
         assert_eq!(two.held.len(), 1);
-        two.accept(usize::MAX, vec![answer(5, -200.0)]);
-        assert_eq!(two.merge(Vec::new())[0].cost, Some(-200.0));
-        two.held.push_back(answer(6, -100.0));
-        two.back.push_back(answer(6, -131.0));
-        assert_eq!(two.merge(Vec::new())[0].cost, Some(-131.0));
+        two.accept(usize::MAX, vec![answer(5, -200.0), answer(6, -131.0)]);
+        assert_eq!(two.merge(Vec::new()), vec![(answer(5, -200.0), true)]);
+        // A frame whose second pass is done before the first pass hands it over
+        // is reported once, with the answer it keeps.
+        assert_eq!(
+            two.merge(vec![answer(6, -100.0)]),
+            vec![(answer(6, -131.0), false)]
+        );
     }
 }
