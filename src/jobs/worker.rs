@@ -409,7 +409,9 @@ impl Jobs {
                             "revised": p.revised,
                         }),
                     );
-                    metrics::counter!("monocap_frames_tracked_total").increment(1);
+                    if !p.revised {
+                        metrics::counter!("monocap_frames_tracked_total").increment(1);
+                    }
                     if let Ok(mut g) = progress.lock() {
                         *g = Some(ProgressRow {
                             frames_done: p.frames_done as u64,
