@@ -9,14 +9,14 @@
 //! frame with the input mask and the model's silhouette tinted over it.
 //!
 //! ```text
-//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--two-way]
+//! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--one-way]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
 //! paper's objective, `Weights::track_rewards`), `--reward-rim N` then withholds them
 //! near the outline (`Weights::reward_rim`); `--polish-evals N` sets the joint
-//! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--two-way` adds the
-//! second pass (`TrackOptions::two_way`).
+//! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--one-way` leaves out
+//! the second pass (`TrackOptions::two_way`).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -96,8 +96,8 @@ fn main() -> Result<()> {
     while let Some(a) = args.next() {
         if a == "--track-rewards" {
             track_rewards = true;
-        } else if a == "--two-way" {
-            two_way = true;
+        } else if a == "--one-way" {
+            two_way = false;
         } else if a == "--reward-rim" {
             let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
             match v {

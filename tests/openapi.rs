@@ -446,14 +446,14 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_runs": 21}), false);
     check(serde_json::json!({"two_way": true}), true);
     check(serde_json::json!({"two_way": "yes"}), false);
-    let on = JobOptions::from_query(&[("two_way".into(), "true".into())]).unwrap();
+    let off = JobOptions::from_query(&[("two_way".into(), "false".into())]).unwrap();
     assert!(
-        on.to_track().unwrap().track.two_way,
-        "two_way=true in a query"
+        !off.to_track().unwrap().track.two_way,
+        "two_way=false in a query"
     );
     assert!(
-        !JobOptions::default().to_track().unwrap().track.two_way,
-        "off by default"
+        JobOptions::default().to_track().unwrap().track.two_way,
+        "on by default"
     );
     check(serde_json::json!({"work_height": 32}), true);
     check(serde_json::json!({"work_height": 1080}), true);

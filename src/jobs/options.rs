@@ -29,8 +29,9 @@ pub struct JobOptions {
     /// Runs of the search in each frame's refit, 1 to 20 (default 2).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_runs: Option<usize>,
-    /// The second pass, backwards over each block of 150 frames (default false;
-    /// see `TrackOptions::two_way`): more accurate, under half the speed.
+    /// The second pass, backwards over each block of up to 150 frames (default true;
+    /// see `TrackOptions::two_way`): more accurate; false is about 1.5 times as
+    /// fast.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub two_way: Option<bool>,
     /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.

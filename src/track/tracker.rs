@@ -12,10 +12,10 @@
 //! - after that, only the previous frame's features (temporal coherence of the
 //!   extremity candidates) and one pose per frame;
 //! - with the second pass ([`TrackOptions::two_way`]), the targets of the block
-//!   of [`TWO_WAY_BLOCK`] frames being read (the first pass reads a whole block
-//!   before it searches its frames) and of the block whose second pass is running:
-//!   two blocks at most; and the first pass's answers until their block's second
-//!   pass is done.
+//!   being read (the first pass reads a whole block before it searches its frames)
+//!   and of the block whose second pass is running: two blocks at most, each under
+//!   [`TWO_WAY_BUDGET`] bytes (shorter blocks for large frames); and the first
+//!   pass's answers until their block's second pass is done.
 //!
 //! Per frame: the search starts at the previous solution moved by the parameter
 //! velocity (when that is not worse than the previous solution itself; and moved
@@ -76,8 +76,23 @@ const HYPOTHESIS_FRAMES: usize = 15;
 const FACING_TIE: f64 = 0.02;
 
 /// Frames in a block of the second pass ([`TrackOptions::two_way`]): its targets
-/// are held (about 5 bytes a pixel each) until its second pass is done.
+/// are held until its second pass is done. Fewer for large frames
+/// ([`two_way_block`]).
 pub const TWO_WAY_BLOCK: usize = 150;
+
+/// The targets of a block of the second pass are kept under this many bytes (at
+/// about 8 bytes a pixel, [`TWO_WAY_BLOCK`] frames of up to 167,772 pixels: 512×288
+/// and smaller frames have whole blocks), down to [`MIN_TWO_WAY_BLOCK`] frames.
+pub const TWO_WAY_BUDGET: usize = 192 << 20;
+
+/// The shortest block of the second pass.
+pub const MIN_TWO_WAY_BLOCK: usize = 30;
+
+/// Frames in a block of the second pass for `width`×`height` targets.
+pub fn two_way_block(width: u32, height: u32) -> usize {
+    let bytes = 8 * (width as usize * height as usize).max(1);
+    (TWO_WAY_BUDGET / bytes).clamp(MIN_TWO_WAY_BLOCK, TWO_WAY_BLOCK)
+}
 
 /// A frame takes the second pass's answer where it costs at least this fraction
 /// less than the first pass's ([`TrackOptions::two_way`]).
@@ -246,7 +261,8 @@ pub struct TrackOptions {
     /// a loss and searched again widely, at most every fifth frame (0.75 by default,
     /// 0 for never): wide fits from the result and from it turned 60° either way.
     pub recover_iou: f64,
-    /// The second pass (off by default): each block of [`TWO_WAY_BLOCK`] frames is
+    /// The second pass (on by default): each block of [`TWO_WAY_BLOCK`] frames
+    /// (fewer for frames of more than 167,772 pixels, [`two_way_block`]) is
     /// tracked a second time, initialised afresh (with the clip's shape) on its
     /// last frame with a person and searched backwards, and a frame takes the
     /// second pass's answer where it costs at least [`TWO_WAY_MARGIN`] less than
@@ -254,12 +270,13 @@ pub struct TrackOptions {
     /// seldom lost in the same way when followed from the other end. Over the
     /// accuracy benchmark's three noise seeds, with a person-free lead-in and
     /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
-    /// PA-MPJPE, model IoU and lost frames (README, "The second pass"), at under
-    /// half the speed (a median 7.8 against 16.5 frames/s with a lead-in, on the
-    /// same machine), below the 10 frames/s the default keeps. Frames are reported
-    /// as the first pass leaves them, and a frame whose answer the second pass
-    /// replaces is reported again once its block is done ([`Progress::revised`]); a
-    /// block's targets are held until then.
+    /// PA-MPJPE, model IoU and lost frames (README, "The second pass"). With more
+    /// than one thread it runs beside the first pass: a median 12.1 and 10.9
+    /// frames/s with a lead-in and without, against 17.9 and 17.2 for the first
+    /// pass alone, on the same machine. Frames are reported as the first pass
+    /// leaves them, and a frame whose answer the second pass replaces is reported
+    /// again once its block is done ([`Progress::revised`]); a block's targets are
+    /// held until then.
     pub two_way: bool,
     /// The initial frame (None: chosen automatically).
     pub init_frame: Option<usize>,
@@ -303,7 +320,7 @@ impl Default for TrackOptions {
             recover_iou: RECOVER_IOU,
             refit_sigma: REFIT_SIGMA,
             refit_runs: REFIT_RUNS,
-            two_way: false,
+            two_way: true,
             init_frame: None,
             init_window: 60,
             fps: 30.0,
@@ -502,9 +519,6 @@ impl Tracker {
     ) -> Result<Track, TrackError> {
         let mut timing = Timing::default();
         let mut prev_features: Option<FrameFeatures> = None;
-        // The next frame's index, target (None without a person) and score as an
-        // initial frame; None after the last frame.
-        type Next = Option<Result<(usize, Option<Target>, f64), TrackError>>;
         let mut next_target = |prev: &mut Option<FrameFeatures>,
                                timing: &mut Timing,
                                skin: Option<&SkinModel>|
@@ -669,8 +683,9 @@ impl Tracker {
                 body: &body,
                 shape,
             };
+            let block = two_way_block(self.camera.width, self.camera.height);
             let mut two_way = TwoWay::new(
-                self.opts.two_way,
+                if self.opts.two_way { block } else { 0 },
                 self.opts.initial.is_some().then_some(init),
             );
             let mut take =
@@ -732,7 +747,7 @@ impl Tracker {
             loop {
                 // The next frame, with the second pass, once its block is whole.
                 while !input_done
-                    && queue.front().map_or(true, |next| match next {
+                    && queue.front().is_none_or(|next| match next {
                         Ok((i, _)) => two_way.waits_for(*i),
                         Err(_) => false,
                     })
@@ -1292,6 +1307,10 @@ struct Pass<'scope, 'env> {
     shape: ShapeValues,
 }
 
+/// The next input frame's index, target (None without a person) and score as an
+/// initial frame; None after the last frame.
+type Next = Option<Result<(usize, Option<Target>, f64), TrackError>>;
+
 /// Frames read and not yet searched by the first pass, with their targets (an
 /// input's failure in its place).
 type Queue = VecDeque<Result<(usize, Option<Arc<Target>>), TrackError>>;
@@ -1337,9 +1356,11 @@ struct TwoWay<'scope> {
 }
 
 impl<'scope> TwoWay<'scope> {
-    fn new(on: bool, keep_first: Option<usize>) -> TwoWay<'scope> {
+    /// Blocks of `block` frames; 0 for no second pass.
+    fn new(block: usize, keep_first: Option<usize>) -> TwoWay<'scope> {
+        let on = block > 0;
         TwoWay {
-            block: if on { TWO_WAY_BLOCK } else { 0 },
+            block,
             from: 0,
             kept: Vec::new(),
             running: None,
@@ -1403,7 +1424,7 @@ impl<'scope> TwoWay<'scope> {
     fn enqueue(
         &mut self,
         pass: &Pass<'scope, '_>,
-        next: Option<Result<(usize, Option<Target>, f64), TrackError>>,
+        next: Next,
         queue: &mut Queue,
     ) -> Result<bool, TrackError> {
         match next {
@@ -2308,8 +2329,20 @@ mod tests {
     }
 
     #[test]
+    fn large_frames_have_shorter_blocks() {
+        assert_eq!(two_way_block(320, 240), TWO_WAY_BLOCK);
+        assert_eq!(two_way_block(512, 288), TWO_WAY_BLOCK);
+        assert_eq!(two_way_block(0, 0), TWO_WAY_BLOCK);
+        // 640×480 at 8 bytes a pixel: 81 frames within the budget.
+        assert_eq!(two_way_block(640, 480), 81);
+        assert!(two_way_block(640, 480) * 8 * 640 * 480 <= TWO_WAY_BUDGET);
+        assert!((two_way_block(640, 480) + 1) * 8 * 640 * 480 > TWO_WAY_BUDGET);
+        assert_eq!(two_way_block(1920, 1080), MIN_TWO_WAY_BLOCK);
+    }
+
+    #[test]
     fn the_second_pass_gathers_whole_blocks() {
-        let mut two = TwoWay::new(true, None);
+        let mut two = TwoWay::new(TWO_WAY_BLOCK, None);
         for i in 0..TWO_WAY_BLOCK - 1 {
             assert!(two.keep(None).is_none(), "frame {i}");
         }
@@ -2319,7 +2352,7 @@ mod tests {
         let (from, block) = (two.from, std::mem::take(&mut two.kept));
         assert_eq!((from, block.len()), (TWO_WAY_BLOCK, 1));
         // Off: nothing is kept, and every frame passes straight through.
-        let mut off = TwoWay::new(false, None);
+        let mut off = TwoWay::new(0, None);
         assert!((0..2 * TWO_WAY_BLOCK).all(|_| off.keep(None).is_none()));
         assert!(off.kept.is_empty());
         assert_eq!(
@@ -2330,7 +2363,7 @@ mod tests {
 
     #[test]
     fn a_frame_takes_the_second_answer_only_when_clearly_cheaper() {
-        let mut two = TwoWay::new(true, Some(4));
+        let mut two = TwoWay::new(TWO_WAY_BLOCK, Some(4));
         // Reported at once, as the first pass left them, and held.
         let first: Vec<_> = (0..6).map(|i| (answer(i, 100.0), false)).collect();
         assert_eq!(
