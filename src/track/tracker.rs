@@ -4,7 +4,7 @@
 //! Frames arrive as a stream ([`FrameInput`]: the silhouette and, for a colour clip,
 //! the frame, at the working resolution). What is kept, and why:
 //!
-//! - until the initial frame is chosen, each frame's [`Target`] (about 5 bytes a
+//! - until the initial frame is chosen, each frame's [`Target`] (about 8 bytes a
 //!   pixel): the frames before it are tracked backwards from it once it is fitted.
 //!   The automatic choice looks at most [`TrackOptions::init_window`] frames with a
 //!   person, so this buffer is bounded; a user-chosen initial frame must lie within
