@@ -896,26 +896,15 @@ impl Tracker {
             window.push(f.expect("tracked"), t);
         }
         let jobs: Vec<Job<Arc<Target>>> = std::iter::from_fn(|| window.next(true)).collect();
-        let threads = self.threads().min(jobs.len()).max(1);
-        let shares: Vec<usize> = (0..threads).collect();
-        let mut refitted: Vec<_> = par_map(&shares, threads, |&t| {
-            let search = Search::new(self, body, ground);
-            let mine = jobs.iter().skip(t).step_by(threads);
-            mine.map(|job| match check() {
-                Ok(()) => search.refit(job),
-                Err(_) => (job.frame.clone(), 0),
-            })
-            .collect::<Vec<_>>()
-            .into_iter()
+        // A search of its own for each job (a search's outline buffers are not
+        // shared between threads).
+        let refitted = par_map(&jobs, self.threads(), |job| match check() {
+            Ok(()) => Search::new(self, body, ground).refit(job),
+            Err(_) => (job.frame.clone(), 0),
         });
         check()?;
-        let mut out = Vec::with_capacity(jobs.len());
-        for i in 0..jobs.len() {
-            let (f, e) = refitted[i % threads].next().expect("a refitted frame");
-            evals += e;
-            out.push(f);
-        }
-        Ok((out, evals))
+        evals += refitted.iter().map(|(_, e)| e).sum::<u64>();
+        Ok((refitted.into_iter().map(|(f, _)| f).collect(), evals))
     }
 
     /// Each initial candidate tracked over the frames after `init` (then, when there
