@@ -696,13 +696,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         None => None,
     };
     println!(
-        "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>6} {:>6} {:>5} {:>6} {:>7} {:>6} {:>6}",
+        "{:44} {:>6} {:>7} {:>8} {:>7} {:>9} {:>9} {:>6} {:>6} {:>5} {:>6} {:>7} {:>6} {:>6}",
         "clip",
         "frames",
         "PCK0.1",
         "PCK-swap",
         "err%",
         "PA-MPJPE",
+        "PA-amb",
         "IoU",
         "silIoU",
         "lost",
@@ -726,13 +727,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
             }
         }
         println!(
-            "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>6} {:>7.1} {:>5.0}% {:>6.3}",
+            "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.1} mm {:>6.3} {:>6.3} {:>5} {:>6} {:>7.1} {:>5.0}% {:>6.3}",
             r.name,
             r.acc.frames(),
             r.acc.pck(),
             r.acc.pck_swapped(),
             100.0 * r.acc.mean_error_frac(),
             r.acc.pa_mpjpe(),
+            r.acc.pa_mpjpe_ambiguous(),
             r.acc.iou(),
             r.silhouette_iou,
             r.lost,
@@ -751,13 +753,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     }
     fps.sort_by(f64::total_cmp);
     println!(
-        "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.3} {:>6} {:>5} {:>6} {:>7.1} {:>6} {:>6.3}",
+        "{:44} {:>6} {:>7.3} {:>8.3} {:>7.2} {:>6.1} mm {:>6.1} mm {:>6.3} {:>6} {:>5} {:>6} {:>7.1} {:>6} {:>6.3}",
         format!("overall ({} clips; fps: median)", reports.len()),
         all.frames(),
         all.pck(),
         all.pck_swapped(),
         100.0 * all.mean_error_frac(),
         all.pa_mpjpe(),
+        all.pa_mpjpe_ambiguous(),
         all.iou(),
         "",
         lost,

@@ -443,10 +443,15 @@ fn bench_writes_its_per_frame_figures() {
     let mut lines = text.lines();
     assert_eq!(
         lines.next(),
-        Some("clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio")
+        Some("clip,frame,pck,pck_swapped,pa_mpjpe_mm,pa_ambiguous_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio")
     );
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
-    assert!(rows.iter().all(|r| r.len() == 10), "{text}");
+    assert!(rows.iter().all(|r| r.len() == 11), "{text}");
+    // Allowing limb swaps and the depth mirror never raises PA-MPJPE.
+    for r in &rows {
+        let (pa, amb): (f64, f64) = (r[4].parse().unwrap(), r[5].parse().unwrap());
+        assert!(amb >= 0.0 && amb <= pa, "{r:?}");
+    }
     // Each clip's printed frame count is its number of rows.
     let stdout = String::from_utf8_lossy(&out.stdout);
     for lead in ["lead 0", "lead 3"] {
@@ -473,11 +478,11 @@ fn bench_writes_its_per_frame_figures() {
     assert_success("bench --oracle-init", &out);
     let text = std::fs::read_to_string(&oracle).unwrap();
     let first: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
-    let (cost, truth): (f64, f64) = (first[6].parse().unwrap(), first[7].parse().unwrap());
+    let (cost, truth): (f64, f64) = (first[7].parse().unwrap(), first[8].parse().unwrap());
     assert!((cost - truth).abs() < 0.2, "tracked {cost}, truth {truth}");
     for line in text.lines().skip(2) {
         let r: Vec<&str> = line.split(',').collect();
-        let t: f64 = r[7].parse().unwrap();
+        let t: f64 = r[8].parse().unwrap();
         assert!(t.is_finite(), "{line}");
     }
     assert!(String::from_utf8_lossy(&out.stdout).contains("missed: "));
@@ -508,7 +513,7 @@ fn bench_seeds_the_clips_noise() {
     let truth = |text: &str| -> Vec<String> {
         text.lines()
             .skip(1)
-            .map(|l| l.split(',').nth(7).unwrap().to_string())
+            .map(|l| l.split(',').nth(8).unwrap().to_string())
             .collect()
     };
     assert_ne!(truth(&other), truth(&default), "{other}\n{default}");

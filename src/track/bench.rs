@@ -11,6 +11,8 @@
 //! - the same allowing a left/right swap of whole limbs (one view cannot tell them);
 //! - mean 2D error in % of the person's image height;
 //! - PA-MPJPE: mean 3D error after the per-frame similarity alignment, in mm;
+//! - the same allowing whole-limb swaps and the body's depth mirror (`PA-amb`,
+//!   [`metrics::pa_mpjpe_ambiguous`]): what is left is error no such choice explains;
 //! - IoU of the model's silhouette with the true silhouette;
 //! - lost frames: frames with a person whose PCK@0.1 (with swaps) is below 0.5.
 
@@ -144,6 +146,9 @@ pub struct FrameReport {
     pub pck: f64,
     pub pck_swapped: f64,
     pub pa_mpjpe_mm: f64,
+    /// PA-MPJPE allowing limb swaps and the depth mirror
+    /// ([`metrics::pa_mpjpe_ambiguous`]).
+    pub pa_ambiguous_mm: f64,
     pub iou: f64,
     /// The tracker's cost (None where it found no person).
     pub cost: Option<f64>,
@@ -158,16 +163,17 @@ pub struct FrameReport {
 impl FrameReport {
     /// The header of [`FrameReport::csv_row`].
     pub const CSV_HEADER: &'static str =
-        "clip,frame,pck,pck_swapped,pa_mpjpe_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio";
+        "clip,frame,pck,pck_swapped,pa_mpjpe_mm,pa_ambiguous_mm,iou,cost,truth_cost,heading_error_deg,depth_ratio";
 
     /// One CSV line (no newline) for the clip `clip`.
     pub fn csv_row(&self, clip: &str) -> String {
         format!(
-            "{clip},{},{:.3},{:.3},{:.1},{:.4},{},{:.1},{:.1},{:.4}",
+            "{clip},{},{:.3},{:.3},{:.1},{:.1},{:.4},{},{:.1},{:.1},{:.4}",
             self.index,
             self.pck,
             self.pck_swapped,
             self.pa_mpjpe_mm,
+            self.pa_ambiguous_mm,
             self.iou,
             self.cost.map_or(String::new(), |c| format!("{c:.1}")),
             self.truth_cost,
@@ -350,6 +356,8 @@ pub fn run_clip(
         // PA-MPJPE, and each joint's share of it.
         let aligned = metrics::align_similarity(&pred3, &true3);
         let pa = metrics::mpjpe(&aligned, &true3) * 10.0;
+        let pa_ambiguous =
+            metrics::pa_mpjpe_ambiguous(&pred3, &true3, &PAIRS, hips_centre(&true3)) * 10.0;
         for ((e, a), t) in report.joint_error_mm.iter_mut().zip(&aligned).zip(&true3) {
             *e += 10.0 * metrics::mpjpe(&[*a], &[*t]);
         }
@@ -359,7 +367,9 @@ pub fn run_clip(
         if swapped.pck() < 0.5 {
             report.lost += 1;
         }
-        report.acc.add_frame(&plain, &swapped, pa, iou);
+        report
+            .acc
+            .add_frame(&plain, &swapped, pa, pa_ambiguous, iou);
         let heading = f.pose[ix::ROOT_RY] - tf.params[ix::ROOT_RY];
         let truth_cost = truth_costs[tf.index];
         if f.cost
@@ -372,6 +382,7 @@ pub fn run_clip(
             pck: plain.pck(),
             pck_swapped: swapped.pck(),
             pa_mpjpe_mm: pa,
+            pa_ambiguous_mm: pa_ambiguous,
             iou,
             cost: f.cost,
             truth_cost,
@@ -380,6 +391,14 @@ pub fn run_clip(
         });
     }
     Ok(report)
+}
+
+/// The midpoint of the hips in `joints` (ordered as [`JOINTS`]): the pivot of a
+/// body's depth mirror.
+fn hips_centre(joints: &[[f64; 3]]) -> [f64; 3] {
+    let at = |j: Joint| joints[JOINTS.iter().position(|&k| k == j).expect("a hip")];
+    let (l, r) = (at(Joint::LeftUpLeg), at(Joint::RightUpLeg));
+    std::array::from_fn(|k| (l[k] + r[k]) / 2.0)
 }
 
 /// The performer's shape values.

@@ -25,6 +25,11 @@
 //!   position, orientation and scale, which a single camera cannot recover
 //!   reliably. Reflections are not allowed, so a mirrored pose still counts
 //!   as an error.
+//! * **PA-MPJPE with ambiguities** ([`pa_mpjpe_ambiguous`]): the least
+//!   PA-MPJPE over the truth and its depth mirror ([`depth_mirror`]), each
+//!   with every combination of whole-limb left/right swaps. One view cannot
+//!   tell these apart from the silhouette alone; what remains is the error
+//!   that no such choice explains.
 //! * [`Accumulator`] sums these over frames and clips. PCK values are pooled
 //!   over joints (total correct / total joints). Error fractions, PA-MPJPE and
 //!   silhouette IoU are averaged over frames.
@@ -277,6 +282,62 @@ pub fn pa_mpjpe(pred: &[[f64; 3]], truth: &[[f64; 3]]) -> f64 {
     mpjpe(&aligned, truth)
 }
 
+/// `points` reflected in the plane through `pivot` square to the line of sight
+/// from the camera (at the origin) to `pivot`: a body's depth mirror, which one
+/// view sees almost as it sees the body (exactly so under an orthographic camera).
+/// Returns the points unchanged when `pivot` is the origin (no line of sight).
+pub fn depth_mirror(points: &[[f64; 3]], pivot: [f64; 3]) -> Vec<[f64; 3]> {
+    let c = Vector3::from(pivot);
+    let Some(d) = c.try_normalize(f64::EPSILON) else {
+        return points.to_vec();
+    };
+    points
+        .iter()
+        .map(|p| {
+            let x = Vector3::from(*p);
+            (x - 2.0 * (x - c).dot(&d) * d).into()
+        })
+        .collect()
+}
+
+/// PA-MPJPE allowing what one view cannot tell apart: the least [`pa_mpjpe`]
+/// over the truth and its [`depth_mirror`] about `pivot`, each with every
+/// combination of whole-limb left/right swaps of `pairs` (the mirror exchanges
+/// left and right, so its swaps matter as much). Returns `0.0` for empty input.
+///
+/// # Panics
+///
+/// Panics if `pred.len() != truth.len()`, if a pair's index is out of range or
+/// its two lists differ in length, or if `pairs` has more than 8 pairs.
+pub fn pa_mpjpe_ambiguous(
+    pred: &[[f64; 3]],
+    truth: &[[f64; 3]],
+    pairs: LimbPairs,
+    pivot: [f64; 3],
+) -> f64 {
+    assert_same_len(pred.len(), truth.len());
+    assert!(pairs.len() <= 8, "pa_mpjpe_ambiguous: at most 8 limb pairs");
+    if pred.is_empty() {
+        return 0.0;
+    }
+    let mut best = f64::INFINITY;
+    for candidate in [truth.to_vec(), depth_mirror(truth, pivot)] {
+        for swaps in 0..1usize << pairs.len() {
+            let mut t = candidate.clone();
+            for (i, (left, right)) in pairs.iter().enumerate() {
+                assert_eq!(left.len(), right.len(), "limb lists of one length");
+                if swaps >> i & 1 == 1 {
+                    for (&l, &r) in left.iter().zip(right.iter()) {
+                        t.swap(l, r);
+                    }
+                }
+            }
+            best = best.min(pa_mpjpe(pred, &t));
+        }
+    }
+    best
+}
+
 /// Mean per-joint position error without alignment (MPJPE), in the units of
 /// `truth`. Returns `0.0` for empty input.
 ///
@@ -322,13 +383,22 @@ pub struct Accumulator {
     joints_swapped: usize,
     sum_error_frac: f64,
     sum_pa_mpjpe: f64,
+    sum_pa_ambiguous: f64,
     sum_iou: f64,
 }
 
 impl Accumulator {
     /// Adds one frame: plain and swapped 2D results (the swapped
-    /// `mean_error_frac` is not used), its PA-MPJPE and its silhouette IoU.
-    pub fn add_frame(&mut self, plain: &Frame2d, swapped: &Frame2d, pa_mpjpe: f64, iou: f64) {
+    /// `mean_error_frac` is not used), its PA-MPJPE, the same with ambiguities
+    /// ([`pa_mpjpe_ambiguous`]) and its silhouette IoU.
+    pub fn add_frame(
+        &mut self,
+        plain: &Frame2d,
+        swapped: &Frame2d,
+        pa_mpjpe: f64,
+        pa_ambiguous: f64,
+        iou: f64,
+    ) {
         self.frames += 1;
         self.correct += plain.correct;
         self.joints += plain.joints;
@@ -336,6 +406,7 @@ impl Accumulator {
         self.joints_swapped += swapped.joints;
         self.sum_error_frac += plain.mean_error_frac;
         self.sum_pa_mpjpe += pa_mpjpe;
+        self.sum_pa_ambiguous += pa_ambiguous;
         self.sum_iou += iou;
     }
 
@@ -348,6 +419,7 @@ impl Accumulator {
         self.joints_swapped += other.joints_swapped;
         self.sum_error_frac += other.sum_error_frac;
         self.sum_pa_mpjpe += other.sum_pa_mpjpe;
+        self.sum_pa_ambiguous += other.sum_pa_ambiguous;
         self.sum_iou += other.sum_iou;
     }
 
@@ -374,6 +446,11 @@ impl Accumulator {
     /// Mean over frames of PA-MPJPE.
     pub fn pa_mpjpe(&self) -> f64 {
         ratio(self.sum_pa_mpjpe, self.frames)
+    }
+
+    /// Mean over frames of PA-MPJPE with ambiguities ([`pa_mpjpe_ambiguous`]).
+    pub fn pa_mpjpe_ambiguous(&self) -> f64 {
+        ratio(self.sum_pa_ambiguous, self.frames)
     }
 
     /// Mean over frames of IoU.
@@ -542,6 +619,79 @@ mod tests {
     const R_LEG: &[usize] = &[10, 11];
     const PAIRS: LimbPairs = &[(L_ARM, R_ARM), (L_LEG, R_LEG)];
 
+    /// skeleton3's limbs as mirror pairs: arms 4–6 and 7–9, legs 10–11 and 12–13.
+    const PAIRS3: LimbPairs = &[(&[4, 5, 6], &[7, 8, 9]), (&[10, 11], &[12, 13])];
+
+    /// skeleton3 placed 5 m from the camera (at the origin), off its axis.
+    fn far_skeleton3() -> (Vec<[f64; 3]>, [f64; 3]) {
+        let pivot = [0.3, 1.0, -500.0];
+        let pts = skeleton3()
+            .iter()
+            .map(|p| {
+                [
+                    p[0] * 100.0 + pivot[0],
+                    p[1] * 100.0,
+                    p[2] * 100.0 + pivot[2],
+                ]
+            })
+            .collect();
+        (pts, pivot)
+    }
+
+    #[test]
+    fn depth_mirror_reflects_along_the_line_of_sight() {
+        let (pts, pivot) = far_skeleton3();
+        let m = depth_mirror(&pts, pivot);
+        let d = Vector3::from(pivot).normalize();
+        for (p, q) in pts.iter().zip(&m) {
+            let (p, q) = (Vector3::from(*p), Vector3::from(*q));
+            // Along the line of sight the offset from the pivot changes sign;
+            // across it nothing moves.
+            let (dp, dq) = (p - Vector3::from(pivot), q - Vector3::from(pivot));
+            assert!((dp.dot(&d) + dq.dot(&d)).abs() < 1e-9);
+            assert!(((dp - dp.dot(&d) * d) - (dq - dq.dot(&d) * d)).norm() < 1e-9);
+        }
+        // An involution; the pivot stays; no line of sight, no change.
+        let back = depth_mirror(&m, pivot);
+        assert!(mpjpe(&back, &pts) < 1e-9);
+        assert_eq!(depth_mirror(&[pivot], pivot), vec![pivot]);
+        assert_eq!(depth_mirror(&pts, [0.0; 3]), pts);
+    }
+
+    #[test]
+    fn ambiguous_pa_mpjpe_forgives_swaps_and_the_mirror_only() {
+        let (truth, pivot) = far_skeleton3();
+        let swap = |pts: &[[f64; 3]], pair: usize| {
+            let mut v = pts.to_vec();
+            let (l, r) = PAIRS3[pair];
+            for (&a, &b) in l.iter().zip(r) {
+                v.swap(a, b);
+            }
+            v
+        };
+        assert!(pa_mpjpe_ambiguous(&truth, &truth, PAIRS3, pivot) < 1e-9);
+        // Arms exchanged, legs exchanged, the depth mirror with its legs exchanged:
+        // plain PA-MPJPE counts each, the ambiguous one none.
+        let mirror = depth_mirror(&truth, pivot);
+        for pred in [swap(&truth, 0), swap(&truth, 1), swap(&mirror, 1)] {
+            assert!(pa_mpjpe(&pred, &truth) > 5.0, "{}", pa_mpjpe(&pred, &truth));
+            assert!(pa_mpjpe_ambiguous(&pred, &truth, PAIRS3, pivot) < 1e-6);
+        }
+        // Any other error stays, and never exceeds the plain figure.
+        let mut off = truth.clone();
+        off[6][0] += 30.0;
+        let amb = pa_mpjpe_ambiguous(&off, &truth, PAIRS3, pivot);
+        assert!(amb > 1.0 && amb <= pa_mpjpe(&off, &truth) + 1e-12, "{amb}");
+        assert_eq!(pa_mpjpe_ambiguous(&[], &[], PAIRS3, pivot), 0.0);
+    }
+
+    #[test]
+    #[should_panic]
+    fn ambiguous_pa_mpjpe_refuses_unequal_limb_lists() {
+        let (t, pivot) = far_skeleton3();
+        pa_mpjpe_ambiguous(&t, &t, &[(&[4, 5], &[7])], pivot);
+    }
+
     fn skeleton2() -> Vec<[f64; 2]> {
         vec![
             [100.0, 20.0],  // 0 head
@@ -656,17 +806,18 @@ mod tests {
             mean_error_frac,
         };
         let mut a = Accumulator::default();
-        a.add_frame(&f(3, 4, 0.1), &f(4, 4, 0.05), 0.02, 0.8);
-        a.add_frame(&f(1, 6, 0.3), &f(2, 6, 0.2), 0.06, 0.6);
+        a.add_frame(&f(3, 4, 0.1), &f(4, 4, 0.05), 0.02, 0.01, 0.8);
+        a.add_frame(&f(1, 6, 0.3), &f(2, 6, 0.2), 0.06, 0.03, 0.6);
         assert_eq!(a.frames(), 2);
         assert!((a.pck() - 4.0 / 10.0).abs() < 1e-15);
         assert!((a.pck_swapped() - 6.0 / 10.0).abs() < 1e-15);
         assert!((a.mean_error_frac() - 0.2).abs() < 1e-15);
         assert!((a.pa_mpjpe() - 0.04).abs() < 1e-15);
+        assert!((a.pa_mpjpe_ambiguous() - 0.02).abs() < 1e-15);
         assert!((a.iou() - 0.7).abs() < 1e-15);
 
         let mut b = Accumulator::default();
-        b.add_frame(&f(10, 10, 0.5), &f(10, 10, 0.5), 0.10, 0.1);
+        b.add_frame(&f(10, 10, 0.5), &f(10, 10, 0.5), 0.10, 0.07, 0.1);
         let mut merged = a.clone();
         merged.merge(&b);
         assert_eq!(merged.frames(), 3);
@@ -674,6 +825,7 @@ mod tests {
         assert!((merged.pck_swapped() - 16.0 / 20.0).abs() < 1e-15);
         assert!((merged.mean_error_frac() - 0.9 / 3.0).abs() < 1e-15);
         assert!((merged.pa_mpjpe() - 0.18 / 3.0).abs() < 1e-15);
+        assert!((merged.pa_mpjpe_ambiguous() - 0.11 / 3.0).abs() < 1e-15);
         assert!((merged.iou() - 1.5 / 3.0).abs() < 1e-15);
 
         // Merging an empty accumulator changes nothing; merging into one equals adding.
