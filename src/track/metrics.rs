@@ -320,22 +320,29 @@ pub fn pa_mpjpe_ambiguous(
     if pred.is_empty() {
         return 0.0;
     }
+    for (left, right) in pairs {
+        assert_eq!(left.len(), right.len(), "limb lists of one length");
+    }
     let mut best = f64::INFINITY;
     for candidate in [truth.to_vec(), depth_mirror(truth, pivot)] {
         for swaps in 0..1usize << pairs.len() {
             let mut t = candidate.clone();
             for (i, (left, right)) in pairs.iter().enumerate() {
-                assert_eq!(left.len(), right.len(), "limb lists of one length");
                 if swaps >> i & 1 == 1 {
-                    for (&l, &r) in left.iter().zip(right.iter()) {
-                        t.swap(l, r);
-                    }
+                    exchange(&mut t, left, right);
                 }
             }
             best = best.min(pa_mpjpe(pred, &t));
         }
     }
     best
+}
+
+/// Exchanges `points[left[i]]` and `points[right[i]]` for every `i`.
+fn exchange<T>(points: &mut [T], left: &[usize], right: &[usize]) {
+    for (&l, &r) in left.iter().zip(right) {
+        points.swap(l, r);
+    }
 }
 
 /// Mean per-joint position error without alignment (MPJPE), in the units of
@@ -664,9 +671,7 @@ mod tests {
         let swap = |pts: &[[f64; 3]], pair: usize| {
             let mut v = pts.to_vec();
             let (l, r) = PAIRS3[pair];
-            for (&a, &b) in l.iter().zip(r) {
-                v.swap(a, b);
-            }
+            exchange(&mut v, l, r);
             v
         };
         assert!(pa_mpjpe_ambiguous(&truth, &truth, PAIRS3, pivot) < 1e-9);
@@ -707,12 +712,6 @@ mod tests {
             [110.0, 130.0], // 10 r hip
             [118.0, 182.0], // 11 r ankle
         ]
-    }
-
-    fn exchange(pts: &mut [[f64; 2]], a: &[usize], b: &[usize]) {
-        for (&i, &j) in a.iter().zip(b) {
-            pts.swap(i, j);
-        }
     }
 
     #[test]
