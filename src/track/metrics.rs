@@ -158,21 +158,9 @@ pub fn pck_frame_swapped(
 /// different lengths, or if a joint index is out of range.
 pub fn swap_limbs_2d(pred: &[[f64; 2]], truth: &[[f64; 2]], pairs: LimbPairs) -> Vec<[f64; 2]> {
     assert_same_len(pred.len(), truth.len());
+    check_pairs(pairs, pred.len());
     let mut out = pred.to_vec();
-    for (pair_index, &(left, right)) in pairs.iter().enumerate() {
-        assert!(
-            left.len() == right.len(),
-            "metrics: limb pair {pair_index} has lists of length {} and {}",
-            left.len(),
-            right.len()
-        );
-        for &j in left.iter().chain(right) {
-            assert!(
-                j < pred.len(),
-                "metrics: limb pair {pair_index} uses joint {j} but there are only {} joints",
-                pred.len()
-            );
-        }
+    for &(left, right) in pairs {
         let mut kept = 0.0;
         let mut swapped = 0.0;
         for (&l, &r) in left.iter().zip(right) {
@@ -320,9 +308,7 @@ pub fn pa_mpjpe_ambiguous(
     if pred.is_empty() {
         return 0.0;
     }
-    for (left, right) in pairs {
-        assert_eq!(left.len(), right.len(), "limb lists of one length");
-    }
+    check_pairs(pairs, truth.len());
     let mut best = f64::INFINITY;
     for candidate in [truth.to_vec(), depth_mirror(truth, pivot)] {
         for swaps in 0..1usize << pairs.len() {
@@ -336,6 +322,24 @@ pub fn pa_mpjpe_ambiguous(
         }
     }
     best
+}
+
+/// Panics unless each pair's two lists have one length and name joints below `n`.
+fn check_pairs(pairs: LimbPairs, n: usize) {
+    for (pair_index, &(left, right)) in pairs.iter().enumerate() {
+        assert!(
+            left.len() == right.len(),
+            "metrics: limb pair {pair_index} has lists of length {} and {}",
+            left.len(),
+            right.len()
+        );
+        for &j in left.iter().chain(right) {
+            assert!(
+                j < n,
+                "metrics: limb pair {pair_index} uses joint {j} but there are only {n} joints"
+            );
+        }
+    }
 }
 
 /// Exchanges `points[left[i]]` and `points[right[i]]` for every `i`.
