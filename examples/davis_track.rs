@@ -10,13 +10,15 @@
 //!
 //! ```text
 //! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--one-way]
+//!     [--recover-spike K]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
 //! paper's objective, `Weights::track_rewards`), `--reward-rim N` then withholds them
 //! near the outline (`Weights::reward_rim`); `--polish-evals N` sets the joint
 //! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--one-way` leaves out
-//! the second pass (`TrackOptions::two_way`).
+//! the second pass (`TrackOptions::two_way`); `--recover-spike K` sets the cost
+//! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -92,6 +94,7 @@ fn main() -> Result<()> {
     let mut track_rewards = false;
     let mut polish_evals = TrackOptions::default().polish_evals;
     let mut two_way = TrackOptions::default().two_way;
+    let mut recover_spike = TrackOptions::default().recover_spike;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
         if a == "--track-rewards" {
@@ -109,6 +112,12 @@ fn main() -> Result<()> {
                 Some(v) => polish_evals = v,
                 None => bail!("--polish-evals: expected a whole number ≥ 0"),
             }
+        } else if a == "--recover-spike" {
+            let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
+            match v {
+                Some(v) if v.is_finite() && v >= 0.0 => recover_spike = v,
+                _ => bail!("--recover-spike: expected a number ≥ 0"),
+            }
         } else {
             picture = PathBuf::from(a);
         }
@@ -124,6 +133,7 @@ fn main() -> Result<()> {
     track.weights.track_rewards = track_rewards;
     track.polish_evals = polish_evals;
     track.two_way = two_way;
+    track.recover_spike = recover_spike;
 
     let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;

@@ -298,6 +298,10 @@ struct BenchArgs {
     /// under this (at most every fifth frame); 0 for never.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().recover_iou)]
     recover_iou: f64,
+    /// Search a frame again widely when its cost is over this many times the median
+    /// of the last ten frames' (at most every fifth frame); 0 for never.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().recover_spike)]
+    recover_spike: f64,
     /// Track the true silhouettes instead of the extracted ones.
     #[arg(long)]
     true_silhouettes: bool,
@@ -683,6 +687,13 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         );
     }
     opts.track.recover_iou = a.recover_iou;
+    if a.recover_spike.is_nan() || a.recover_spike < 0.0 {
+        anyhow::bail!(
+            "--recover-spike {}: expected a factor from 0 (never) up",
+            a.recover_spike
+        );
+    }
+    opts.track.recover_spike = a.recover_spike;
     a.weights.apply(&mut opts.track.weights)?;
     let mut per_frame = match &a.per_frame {
         Some(path) => {
