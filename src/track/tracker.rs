@@ -1586,10 +1586,12 @@ impl Drop for TwoWay<'_> {
 }
 
 /// Whether a frame's cost is a spike: over `k` times the median of the earlier
-/// frames' costs `recent` (never for `k` 0, a positive median, or fewer than
-/// [`SPIKE_MIN`] of them). A body that turned while the model did not, or a limb
-/// that went over to the wrong side, leaves the silhouette covered well enough for
-/// the IoU but costs several times what the frames before it did.
+/// frames' costs `recent`. Never for `k` 0, with fewer than [`SPIKE_MIN`] of them, or
+/// when their median is not positive (the objective with the rewards paid while
+/// tracking, [`Weights::track_rewards`], can be negative, and then only the IoU
+/// starts a recovery). A body that turned while the model did not can leave the
+/// silhouette covered well enough for the IoU yet cost several times what the
+/// frames before it did.
 fn cost_spike(recent: &VecDeque<f64>, cost: f64, k: f64) -> bool {
     if k <= 0.0 || recent.len() < SPIKE_MIN {
         return false;
@@ -1957,8 +1959,9 @@ impl<'a> Search<'a> {
     /// Coarse still: in a synthetic 70° turn (tests/track.rs) it covers the person
     /// again (IoU 0.631 → 0.775) but at heading −57°, costing −37,371 where the true
     /// pose costs −49,471; and a loss the frame's search leaves above IoU 0.75 (a
-    /// 45° turn ends at 0.784) does not trigger it through the IoU. A frame whose
-    /// cost jumps does ([`TrackOptions::recover_spike`], [`cost_spike`]).
+    /// 45° turn ends at 0.784) does not trigger it through the IoU; a frame whose
+    /// cost jumps over the recent frames' starts it too
+    /// ([`TrackOptions::recover_spike`], [`cost_spike`]).
     fn recover(&self, target: &Target, best: &mut Pose, best_f: &mut f64) -> (bool, u64) {
         let mut found = false;
         let mut spent = 0;
