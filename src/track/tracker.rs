@@ -1625,6 +1625,17 @@ impl History {
         }
     }
 
+    /// Whether a frame's cost is a spike against the recent frames' ([`cost_spike`]),
+    /// then remembered among them.
+    fn spike(&mut self, cost: f64, k: f64) -> bool {
+        let spike = cost_spike(&self.costs, cost, k);
+        if self.costs.len() == SPIKE_WINDOW {
+            self.costs.pop_front();
+        }
+        self.costs.push_back(cost);
+        spike
+    }
+
     fn push(&mut self, pose: Pose) {
         self.before = Some(self.last);
         self.last = pose;
@@ -1816,11 +1827,7 @@ impl<'a> Search<'a> {
                 iou = ev.iou(&best);
             }
         }
-        let spike = cost_spike(&history.costs, best_f, opts.recover_spike);
-        if history.costs.len() == SPIKE_WINDOW {
-            history.costs.pop_front();
-        }
-        history.costs.push_back(best_f);
+        let spike = history.spike(best_f, opts.recover_spike);
         if !keyframe && (iou < opts.recover_iou || spike) && history.quiet >= RECOVER_GAP {
             history.quiet = 0;
             let (better, evals) = self.recover(target, &mut best, &mut best_f);
