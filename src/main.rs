@@ -328,6 +328,11 @@ struct BenchArgs {
     /// with other noise, to see how far the figures move by chance.
     #[arg(long, default_value_t = 1)]
     seed: u64,
+    /// Every N frames with a person (0: never), also find the bottom of the truth's
+    /// basin under the fitted shape and say whether it costs less than the tracked
+    /// answer (slow: two searches of 9,000 evaluations per probed frame).
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    basin_probe: usize,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -664,6 +669,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         oracle_init: a.oracle_init,
         oracle_shape: a.oracle_shape,
         seed: a.seed,
+        basin_probe: a.basin_probe,
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
@@ -801,6 +807,9 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         100.0 * missed as f64 / all.frames().max(1) as f64,
         100.0 * bench::MISSED_GAP
     );
+    if a.basin_probe > 0 {
+        print_basins(&reports, a.basin_probe);
+    }
     if let (Some(path), Some(mut f)) = (&a.per_frame, per_frame) {
         if let Some(e) = write_error {
             return Err(e).with_context(|| format!("writing {}", path.display()));
@@ -809,6 +818,40 @@ fn bench_command(a: BenchArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+/// `monocap bench --basin-probe`'s table: per clip and overall.
+fn print_basins(reports: &[monocap::track::bench::ClipReport], every: usize) {
+    use monocap::track::bench::BasinProbe;
+    println!(
+        "the truth's basin under the fitted shape, every {every} frames with a person \
+         (both it and the tracked answer refined alike):"
+    );
+    println!(
+        "{:44} {:>6} {:>8} {:>8} {:>10} {:>10} {:>10}",
+        "clip", "probed", "cheaper", ">20%", "PA tracked", "PA truth", "PA cheaper"
+    );
+    let line = |name: &str, b: &BasinProbe| {
+        let n = b.frames.max(1) as f64;
+        println!(
+            "{:44} {:>6} {:>8} {:>8} {:>7.1} mm {:>7.1} mm {:>7.1} mm",
+            name,
+            b.frames,
+            b.truth_cheaper,
+            b.truth_much_cheaper,
+            b.pa_tracked / n,
+            b.pa_truth / n,
+            b.pa_cheaper / n
+        );
+    };
+    let mut all = BasinProbe::default();
+    for r in reports {
+        if let Some(b) = &r.basin {
+            line(&r.name, b);
+            all.merge(b);
+        }
+    }
+    line("overall", &all);
 }
 
 /// What `-o` writes, from its extension.

@@ -488,6 +488,49 @@ fn bench_writes_its_per_frame_figures() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("missed: "));
 }
 
+/// `bench --basin-probe N` compares the tracked answer with the bottom of the
+/// truth's basin on every Nth frame with a person. Started from the true shape and
+/// pose, that bottom is next to the truth, and the table counts the probed frames.
+#[test]
+fn bench_probes_the_truths_basin() {
+    let dir = TempDir::new("cli-bench-basin");
+    let mocap = fixture_mocap(&dir);
+    let csv = dir.path("frames.csv");
+    let out = short_bench(
+        &mocap,
+        "60",
+        "2",
+        "0.2",
+        &csv,
+        &["--oracle-init", "--basin-probe", "3"],
+    );
+    assert_success("bench --basin-probe", &out);
+    let rows = std::fs::read_to_string(&csv).unwrap().lines().count() - 1;
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    let table = stdout
+        .split("the truth's basin under the fitted shape")
+        .nth(1)
+        .unwrap_or_else(|| panic!("no basin table in {stdout}"));
+    let overall: Vec<&str> = table
+        .lines()
+        .find(|l| l.starts_with("overall"))
+        .unwrap_or_else(|| panic!("no overall line in {table}"))
+        .split_whitespace()
+        .collect();
+    // overall, probed, cheaper, >20%, PA tracked, mm, PA truth, mm, PA cheaper, mm
+    let n = |i: usize| -> f64 { overall[i].parse().unwrap() };
+    assert_eq!(n(1) as usize, rows.div_ceil(3), "{table}");
+    assert!(n(3) <= n(2) && n(2) <= n(1), "{table}");
+    assert!(n(6) < 15.0, "the truth's basin from the truth: {table}");
+    let (lo, hi) = (n(4).min(n(6)), n(4).max(n(6)));
+    assert!(n(8) >= lo - 0.05 && n(8) <= hi + 0.05, "{table}");
+    assert_fails_with(
+        "a probe interval that is not a number",
+        &monocap(&["bench", "--mocap", s(&mocap), "--basin-probe", "often"]),
+        "--basin-probe",
+    );
+}
+
 /// `bench --seed` renders the same motions with other background and sensor noise:
 /// the same seed gives the same figures, line for line (tracking is deterministic),
 /// another seed other silhouettes and so other truth costs.

@@ -24,14 +24,15 @@ use image::RgbImage;
 
 use super::metrics::{self, Accumulator};
 use super::objective::{Evaluator, Target};
-use super::tracker::{FrameInput, TrackOptions, Tracker};
-use crate::body::params::{ix, ShapeValues, MOTION_COUNT, SHAPE_COUNT};
+use super::simplex::{minimize, SimplexOptions};
+use super::tracker::{FrameInput, Track, TrackOptions, Tracker};
+use crate::body::params::{ix, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE_COUNT};
 use crate::body::skeleton::Joint;
 use crate::body::{Body, Camera, Mask};
 use crate::clip::write::Frame;
 use crate::motion::bvh::Bvh;
 use crate::motion::retarget::JointMap;
-use crate::synth::{synthesize_with, Style, SynthOptions, Truth};
+use crate::synth::{synthesize_with, Style, SynthOptions, Truth, TruthFrame};
 use crate::vision::features::{compute, FeatureOptions};
 use crate::vision::silhouette::{Segmenter, SilhouetteOptions};
 use crate::vision::skin::SkinModel;
@@ -81,6 +82,9 @@ pub struct BenchOptions {
     /// ([`SynthOptions::seed`]): another seed renders the same motion with other
     /// noise, which shows how far the figures move by chance.
     pub seed: u64,
+    /// Every this many frames with a person (0: never), compare the tracker's
+    /// answer with the truth's basin under the fitted shape ([`BasinProbe`]).
+    pub basin_probe: usize,
     pub track: TrackOptions,
 }
 
@@ -100,6 +104,7 @@ impl Default for BenchOptions {
             oracle_init: false,
             oracle_shape: false,
             seed: SynthOptions::default().seed,
+            basin_probe: 0,
             track: TrackOptions::default(),
         }
     }
@@ -131,6 +136,44 @@ pub struct ClipReport {
     pub joint_error_mm: [f64; JOINTS.len()],
     /// Each frame with a person, in order.
     pub frames: Vec<FrameReport>,
+    /// The truth's basin against the tracker's answer, when asked for
+    /// ([`BenchOptions::basin_probe`]).
+    pub basin: Option<BasinProbe>,
+}
+
+/// Does the objective, with the shape the tracker fitted, prefer a pose near the
+/// truth to the tracker's answer? On some frames (every
+/// [`BenchOptions::basin_probe`]-th) the true pose is given the fitted body (its
+/// root placed on the truth's line of sight, then fitted) and refined by the
+/// downhill simplex over all 30 values at once: the bottom of the truth's basin.
+/// The tracker's answer is refined the same way, so that the two had the same
+/// search. Where the truth's basin is the cheaper, a search that found it would be
+/// right by the objective's own measure; where it is not, the objective (with this
+/// shape) prefers a wrong pose.
+#[derive(Clone, Debug, Default)]
+pub struct BasinProbe {
+    pub frames: usize,
+    /// Frames where the bottom of the truth's basin costs less than the tracker's
+    /// answer, refined.
+    pub truth_cheaper: usize,
+    /// ... and by more than a fifth.
+    pub truth_much_cheaper: usize,
+    /// Sums over the frames of PA-MPJPE (mm): of the tracker's answer refined, of
+    /// the bottom of the truth's basin, and of the cheaper of the two.
+    pub pa_tracked: f64,
+    pub pa_truth: f64,
+    pub pa_cheaper: f64,
+}
+
+impl BasinProbe {
+    pub fn merge(&mut self, o: &BasinProbe) {
+        self.frames += o.frames;
+        self.truth_cheaper += o.truth_cheaper;
+        self.truth_much_cheaper += o.truth_much_cheaper;
+        self.pa_tracked += o.pa_tracked;
+        self.pa_truth += o.pa_truth;
+        self.pa_cheaper += o.pa_cheaper;
+    }
 }
 
 /// A frame is missed when the truth costs less than the tracker's result by more than
@@ -324,6 +367,7 @@ pub fn run_clip(
         shape_error: metrics::shape_error(&track.shape, &truth.shape.values),
         joint_error_mm: [0.0; JOINTS.len()],
         frames: Vec::new(),
+        basin: None,
     };
     let truth_costs = truth_costs(
         &kept_silhouettes,
@@ -333,6 +377,18 @@ pub fn run_clip(
         track.skin.as_ref(),
         opts,
     );
+    if opts.basin_probe > 0 {
+        report.basin = Some(probe_basins(
+            &kept_silhouettes,
+            &kept_frames,
+            &truth,
+            &camera,
+            &track,
+            &map,
+            &masks,
+            opts,
+        ));
+    }
     drop((kept_silhouettes, kept_frames));
     for tf in &truth.frames {
         let f = &track.frames[tf.index];
@@ -445,4 +501,132 @@ fn truth_costs(
         prev = Some(f);
     }
     out
+}
+
+/// [`BasinProbe`] for one clip.
+#[allow(clippy::too_many_arguments)]
+fn probe_basins(
+    silhouettes: &[Mask],
+    images: &[RgbImage],
+    truth: &Truth,
+    camera: &Camera,
+    track: &Track,
+    map: &JointMap,
+    masks: &[Mask],
+    opts: &BenchOptions,
+) -> BasinProbe {
+    let body = Body::new(&track.shape);
+    let features = FeatureOptions {
+        colours: track.skin.is_some(),
+        ..opts.track.features.clone()
+    };
+    // Every value within its limits; the root anywhere.
+    let steps: Vec<f64> = MOTION.iter().map(|m| 0.5 * m.scale).collect();
+    let mut lo: Vec<f64> = MOTION.iter().map(|m| m.lo).collect();
+    let mut hi: Vec<f64> = MOTION.iter().map(|m| m.hi).collect();
+    for k in ix::ROOT_TX..=ix::ROOT_TZ {
+        lo[k] = f64::NEG_INFINITY;
+        hi[k] = f64::INFINITY;
+    }
+    let refine = |ev: &mut Evaluator, start: Pose| -> (Pose, f64) {
+        let (mut best, mut best_f) = (start, ev.cost(&start));
+        for _ in 0..BASIN_ROUNDS {
+            let r = minimize(
+                |x| ev.cost(&pose_of(x)),
+                &best,
+                &steps,
+                &lo,
+                &hi,
+                &SimplexOptions {
+                    max_evals: BASIN_EVALS,
+                    ..SimplexOptions::default()
+                },
+            );
+            if r.f < best_f {
+                (best, best_f) = (pose_of(&r.x), r.f);
+            }
+        }
+        (best, best_f)
+    };
+    let pa = |pose: &Pose, tf: &TruthFrame| -> f64 {
+        let posed = body.posed(pose);
+        let pred: Vec<[f64; 3]> = JOINTS
+            .iter()
+            .map(|&j| camera.to_contract(&posed.joint(j)))
+            .collect();
+        let true3: Vec<[f64; 3]> = JOINTS
+            .iter()
+            .map(|j| tf.joints3d[map.source[j.index()]])
+            .collect();
+        metrics::mpjpe(&metrics::align_similarity(&pred, &true3), &true3) * 10.0
+    };
+    let mut out = BasinProbe::default();
+    let mut prev = None;
+    let mut at = truth.frames.iter().peekable();
+    let mut person = 0usize;
+    for (i, (s, img)) in silhouettes.iter().zip(images).enumerate() {
+        let f = compute(s, Some(img), prev.as_ref(), &features);
+        let frame = at.next_if(|tf| tf.index == i);
+        let tracked = &track.frames[i];
+        if let (Some(tf), true) = (frame, tracked.person) {
+            person += 1;
+            if (person - 1).is_multiple_of(opts.basin_probe) && mask_height(&masks[i]) > 0.0 {
+                let mut target = Target::new(&f, &opts.track.weights);
+                if let Some(m) = track.skin.as_ref() {
+                    target.add_skin(m, opts.track.weights.skin);
+                }
+                let mut ev = Evaluator::new(&body, camera, &target, opts.track.weights, None);
+                let mut start = pose_of(&tf.params);
+                // The fitted body is not the performer's size: its root goes on the
+                // truth's line of sight at the tracker's depth, then is fitted.
+                let depth = tracked.pose[ix::ROOT_TZ] / start[ix::ROOT_TZ];
+                for v in &mut start[ix::ROOT_TX..=ix::ROOT_TZ] {
+                    *v *= depth;
+                }
+                let root = minimize(
+                    |x| {
+                        let mut p = start;
+                        p[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(x);
+                        ev.cost(&p)
+                    },
+                    &start[ix::ROOT_TX..=ix::ROOT_TZ],
+                    &[2.0, 2.0, 10.0],
+                    &[f64::NEG_INFINITY; 3],
+                    &[f64::INFINITY; 3],
+                    &SimplexOptions {
+                        max_evals: 300,
+                        ..SimplexOptions::default()
+                    },
+                );
+                start[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&root.x);
+                let (basin, basin_f) = refine(&mut ev, start);
+                let (answer, answer_f) = refine(&mut ev, tracked.pose);
+                let (pa_basin, pa_answer) = (pa(&basin, tf), pa(&answer, tf));
+                out.frames += 1;
+                out.pa_truth += pa_basin;
+                out.pa_tracked += pa_answer;
+                if basin_f < answer_f {
+                    out.truth_cheaper += 1;
+                    out.pa_cheaper += pa_basin;
+                } else {
+                    out.pa_cheaper += pa_answer;
+                }
+                if basin_f < answer_f - 0.2 * answer_f.abs() {
+                    out.truth_much_cheaper += 1;
+                }
+            }
+        }
+        prev = Some(f);
+    }
+    out
+}
+
+/// Rounds of the simplex, and evaluations in each, of [`probe_basins`]' refinements.
+const BASIN_ROUNDS: usize = 3;
+const BASIN_EVALS: usize = 3000;
+
+fn pose_of(x: &[f64]) -> Pose {
+    let mut p = [0.0; MOTION_COUNT];
+    p.copy_from_slice(x);
+    p
 }
