@@ -330,7 +330,7 @@ struct BenchArgs {
     seed: u64,
     /// Every N frames with a person (0: never), also find the bottom of the truth's
     /// basin under the fitted shape and say whether it costs less than the tracked
-    /// answer (slow: two searches of 9,000 evaluations per probed frame).
+    /// answer (two searches of up to 9,000 evaluations per probed frame).
     #[arg(long, default_value_t = 0, value_name = "N")]
     basin_probe: usize,
     #[command(flatten)]

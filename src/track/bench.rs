@@ -481,26 +481,50 @@ fn truth_costs(
 ) -> Vec<f64> {
     let body = Body::new(&true_shape(truth));
     let mut out = vec![f64::INFINITY; silhouettes.len()];
-    let mut prev = None;
-    let mut at = truth.frames.iter().peekable();
+    truth_targets(
+        silhouettes,
+        images,
+        truth,
+        skin,
+        opts,
+        |_| true,
+        |tf, target| {
+            out[tf.index] = Evaluator::new(&body, camera, target, opts.track.weights, None)
+                .cost(&pose_of(&tf.params));
+        },
+    );
+    out
+}
+
+/// Hands `each` the tracker's target (features computed as the tracker computes
+/// them, the skin colour it learned) on the frames of the truth that `pick` takes,
+/// in order.
+fn truth_targets(
+    silhouettes: &[Mask],
+    images: &[RgbImage],
+    truth: &Truth,
+    skin: Option<&SkinModel>,
+    opts: &BenchOptions,
+    mut pick: impl FnMut(&TruthFrame) -> bool,
+    mut each: impl FnMut(&TruthFrame, &Target),
+) {
     let features = FeatureOptions {
         colours: skin.is_some(),
         ..opts.track.features.clone()
     };
+    let mut prev = None;
+    let mut at = truth.frames.iter().peekable();
     for (i, (s, img)) in silhouettes.iter().zip(images).enumerate() {
         let f = compute(s, Some(img), prev.as_ref(), &features);
-        if let Some(tf) = at.next_if(|tf| tf.index == i) {
+        if let Some(tf) = at.next_if(|tf| tf.index == i).filter(|tf| pick(tf)) {
             let mut target = Target::new(&f, &opts.track.weights);
             if let Some(m) = skin {
                 target.add_skin(m, opts.track.weights.skin);
             }
-            let mut pose = [0.0; MOTION_COUNT];
-            pose.copy_from_slice(&tf.params);
-            out[i] = Evaluator::new(&body, camera, &target, opts.track.weights, None).cost(&pose);
+            each(tf, &target);
         }
         prev = Some(f);
     }
-    out
 }
 
 /// [`BasinProbe`] for one clip.
@@ -516,10 +540,6 @@ fn probe_basins(
     opts: &BenchOptions,
 ) -> BasinProbe {
     let body = Body::new(&track.shape);
-    let features = FeatureOptions {
-        colours: track.skin.is_some(),
-        ..opts.track.features.clone()
-    };
     // Every value within its limits; the root anywhere.
     let steps: Vec<f64> = MOTION.iter().map(|m| 0.5 * m.scale).collect();
     let mut lo: Vec<f64> = MOTION.iter().map(|m| m.lo).collect();
@@ -561,63 +581,64 @@ fn probe_basins(
         metrics::mpjpe(&metrics::align_similarity(&pred, &true3), &true3) * 10.0
     };
     let mut out = BasinProbe::default();
-    let mut prev = None;
-    let mut at = truth.frames.iter().peekable();
     let mut person = 0usize;
-    for (i, (s, img)) in silhouettes.iter().zip(images).enumerate() {
-        let f = compute(s, Some(img), prev.as_ref(), &features);
-        let frame = at.next_if(|tf| tf.index == i);
-        let tracked = &track.frames[i];
-        if let (Some(tf), true) = (frame, tracked.person) {
-            person += 1;
-            if (person - 1).is_multiple_of(opts.basin_probe) && mask_height(&masks[i]) > 0.0 {
-                let mut target = Target::new(&f, &opts.track.weights);
-                if let Some(m) = track.skin.as_ref() {
-                    target.add_skin(m, opts.track.weights.skin);
-                }
-                let mut ev = Evaluator::new(&body, camera, &target, opts.track.weights, None);
-                let mut start = pose_of(&tf.params);
-                // The fitted body is not the performer's size: its root goes on the
-                // truth's line of sight at the tracker's depth, then is fitted.
-                let depth = tracked.pose[ix::ROOT_TZ] / start[ix::ROOT_TZ];
-                for v in &mut start[ix::ROOT_TX..=ix::ROOT_TZ] {
-                    *v *= depth;
-                }
-                let root = minimize(
-                    |x| {
-                        let mut p = start;
-                        p[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(x);
-                        ev.cost(&p)
-                    },
-                    &start[ix::ROOT_TX..=ix::ROOT_TZ],
-                    &[2.0, 2.0, 10.0],
-                    &[f64::NEG_INFINITY; 3],
-                    &[f64::INFINITY; 3],
-                    &SimplexOptions {
-                        max_evals: 300,
-                        ..SimplexOptions::default()
-                    },
-                );
-                start[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&root.x);
-                let (basin, basin_f) = refine(&mut ev, start);
-                let (answer, answer_f) = refine(&mut ev, tracked.pose);
-                let (pa_basin, pa_answer) = (pa(&basin, tf), pa(&answer, tf));
-                out.frames += 1;
-                out.pa_truth += pa_basin;
-                out.pa_tracked += pa_answer;
-                if basin_f < answer_f {
-                    out.truth_cheaper += 1;
-                    out.pa_cheaper += pa_basin;
-                } else {
-                    out.pa_cheaper += pa_answer;
-                }
-                if basin_f < answer_f - 0.2 * answer_f.abs() {
-                    out.truth_much_cheaper += 1;
-                }
+    let pick = |tf: &TruthFrame| {
+        let tracked = track.frames[tf.index].person;
+        person += usize::from(tracked);
+        tracked
+            && (person - 1).is_multiple_of(opts.basin_probe)
+            && mask_height(&masks[tf.index]) > 0.0
+    };
+    truth_targets(
+        silhouettes,
+        images,
+        truth,
+        track.skin.as_ref(),
+        opts,
+        pick,
+        |tf, target| {
+            let tracked = &track.frames[tf.index];
+            let mut ev = Evaluator::new(&body, camera, target, opts.track.weights, None);
+            let mut start = pose_of(&tf.params);
+            // The fitted body is not the performer's size: its root goes on the truth's
+            // line of sight at the tracker's depth, then is fitted.
+            let depth = tracked.pose[ix::ROOT_TZ] / start[ix::ROOT_TZ];
+            for v in &mut start[ix::ROOT_TX..=ix::ROOT_TZ] {
+                *v *= depth;
             }
-        }
-        prev = Some(f);
-    }
+            let root = minimize(
+                |x| {
+                    let mut p = start;
+                    p[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(x);
+                    ev.cost(&p)
+                },
+                &start[ix::ROOT_TX..=ix::ROOT_TZ],
+                &[2.0, 2.0, 10.0],
+                &[f64::NEG_INFINITY; 3],
+                &[f64::INFINITY; 3],
+                &SimplexOptions {
+                    max_evals: 300,
+                    ..SimplexOptions::default()
+                },
+            );
+            start[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&root.x);
+            let (basin, basin_f) = refine(&mut ev, start);
+            let (answer, answer_f) = refine(&mut ev, tracked.pose);
+            let (pa_basin, pa_answer) = (pa(&basin, tf), pa(&answer, tf));
+            out.frames += 1;
+            out.pa_truth += pa_basin;
+            out.pa_tracked += pa_answer;
+            if basin_f < answer_f {
+                out.truth_cheaper += 1;
+                out.pa_cheaper += pa_basin;
+            } else {
+                out.pa_cheaper += pa_answer;
+            }
+            if basin_f < answer_f - 0.2 * answer_f.abs() {
+                out.truth_much_cheaper += 1;
+            }
+        },
+    );
     out
 }
 
