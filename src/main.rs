@@ -144,6 +144,12 @@ struct WeightArgs {
     /// model's bare parts cover (forearms, hands, neck, head); 0 for none
     #[arg(long, default_value_t = 0.0)]
     w_skin: f64,
+    /// While tracking, count a pixel on the model's outline by the share of its
+    /// row the model covers, so the cost changes smoothly as a part moves by less
+    /// than a pixel (the initialisation counts whole pixels): a closer fit to the
+    /// silhouettes, about 28% slower
+    #[arg(long)]
+    smooth: bool,
 }
 
 impl WeightArgs {
@@ -171,6 +177,7 @@ impl WeightArgs {
         w.track_rewards = self.track_rewards;
         w.outline = self.w_outline;
         w.skin = self.w_skin;
+        w.smooth = self.smooth;
         Ok(())
     }
 }

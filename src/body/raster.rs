@@ -18,7 +18,7 @@ use image::GrayImage;
 use nalgebra::{IsometryMatrix3, Matrix3, Point3, Vector3};
 
 use super::camera::Camera;
-use super::parts::{Kind, Part};
+use super::parts::{Kind, Part, PART_COUNT};
 use super::skeleton::{Posed, LANDMARK_COUNT};
 use super::Body;
 
@@ -357,29 +357,36 @@ impl Prepared {
         (self.a, 2.0 * (or * op - k * rp), or * or - k * rr)
     }
 
+    /// Where along the row `r` the quadratic's test passes: None when nowhere,
+    /// `Some(None)` when the quadratic is degenerate (every pixel must be tested).
+    fn row_roots(&self, r: &Vector3<f64>) -> Option<Option<(f64, f64)>> {
+        let (a, b, c) = self.row_quadratic(r);
+        if a >= -1e-18 {
+            return Some(None);
+        }
+        let disc = b * b - 4.0 * a * c;
+        if disc < 0.0 {
+            return None;
+        }
+        let s = disc.sqrt();
+        // Stable roots of a·u² + b·u + c; a < 0, so the test passes between them.
+        let qq = -0.5 * (b + b.signum() * s);
+        let (r1, r2) = if qq != 0.0 {
+            (qq / a, c / qq)
+        } else {
+            (0.0, 0.0)
+        };
+        Some(Some((r1.min(r2), r1.max(r2))))
+    }
+
     /// The inclusive pixel span of a row where the quadratic's test passes, clipped
     /// to the bounding box.
     fn row_span(&self, r: &Vector3<f64>) -> Option<(i64, i64)> {
-        let (a, b, c) = self.row_quadratic(r);
-        let (lo, hi) = if a < -1e-18 {
-            let disc = b * b - 4.0 * a * c;
-            if disc < 0.0 {
-                return None;
-            }
-            let s = disc.sqrt();
-            // Stable roots of a·u² + b·u + c; a < 0, so the test passes between them.
-            let qq = -0.5 * (b + b.signum() * s);
-            let (r1, r2) = if qq != 0.0 {
-                (qq / a, c / qq)
-            } else {
-                (0.0, 0.0)
-            };
-            (r1.min(r2), r1.max(r2))
-        } else {
-            // Degenerate (the camera sits inside a cylinder's infinite hull, or the
-            // conic is not an ellipse): test every pixel of the box.
-            (f64::NEG_INFINITY, f64::INFINITY)
-        };
+        // Degenerate (the camera sits inside a cylinder's infinite hull, or the
+        // conic is not an ellipse): test every pixel of the box.
+        let (lo, hi) = self
+            .row_roots(r)?
+            .unwrap_or((f64::NEG_INFINITY, f64::INFINITY));
         let x0 = if lo.is_finite() {
             ceil_i64(lo - 0.5).max(self.x0)
         } else {
@@ -391,6 +398,68 @@ impl Prepared {
             self.x1
         };
         (x0 <= x1).then_some((x0, x1))
+    }
+
+    /// The part's span on row `y`'s centre line as real columns `[lo, hi]` (pixel x
+    /// covers `[x, x + 1)`), clipped to `[0, width]`: the exact roots for an
+    /// ellipsoid; for a cylinder the hull's roots, each end its caps trim found to
+    /// 1/64 of a pixel by bisection. A sliver of a cylinder between two pixel
+    /// centres is missed.
+    fn row_interval(&self, y: i64, width: f64) -> Option<(f64, f64)> {
+        let r = self.row_base(y as f64 + 0.5);
+        let (lo, hi, exact) = match self.row_roots(&r)? {
+            Some((lo, hi)) => (lo.max(0.0), hi.min(width), true),
+            // Degenerate (see `row_span`): the box, each end found by the ray test.
+            None => (
+                (self.x0 as f64 - 0.5).max(0.0),
+                (self.x1 as f64 + 1.5).min(width),
+                false,
+            ),
+        };
+        if lo >= hi {
+            return None;
+        }
+        if exact && self.kind == Kind::Ellipsoid {
+            return Some((lo, hi));
+        }
+        let dir = |u: f64| r + u * self.p;
+        let (first, last) = (ceil_i64(lo - 0.5), floor_i64(hi - 0.5));
+        let (mut x0, mut x1) = (first, last);
+        while x0 <= x1 && !self.hits(&dir(x0 as f64 + 0.5)) {
+            x0 += 1;
+        }
+        while x1 >= x0 && !self.hits(&dir(x1 as f64 + 0.5)) {
+            x1 -= 1;
+        }
+        if x0 > x1 {
+            return None;
+        }
+        // From a point off the part (`out`) to one on it (`inside`): where the
+        // ray test changes.
+        let edge = |mut out: f64, mut inside: f64| {
+            for _ in 0..6 {
+                let m = 0.5 * (out + inside);
+                if self.hits(&dir(m)) {
+                    inside = m;
+                } else {
+                    out = m;
+                }
+            }
+            0.5 * (out + inside)
+        };
+        // The hull's own end where the ray just inside it meets the part.
+        let eps = 1e-4;
+        let l = if exact && x0 == first && self.hits(&dir(lo + eps)) {
+            lo
+        } else {
+            edge(lo.max(x0 as f64 - 0.5), x0 as f64 + 0.5)
+        };
+        let h = if exact && x1 == last && self.hits(&dir(hi - eps)) {
+            hi
+        } else {
+            edge(hi.min(x1 as f64 + 1.5), x1 as f64 + 0.5)
+        };
+        (l < h).then_some((l, h))
     }
 
     /// The exact ray test for the pixel whose ray direction is `d`.
@@ -571,6 +640,70 @@ pub fn render_parts(
         }
     }
     rows
+}
+
+/// Each part's span on each row's centre line in real columns, for an objective
+/// that moves smoothly as a part's outline crosses a pixel (a pixel counts for the
+/// share of its row's centre line the model covers) rather than in whole pixels.
+#[derive(Clone, Debug)]
+pub struct PartSpans {
+    width: u32,
+    height: u32,
+    /// Per part, the rows last spanned (None: off-screen).
+    rows: [Option<(u32, u32)>; PART_COUNT],
+    /// `part × height + y` → `[lo, hi]`; `lo ≥ hi` where the row misses the part.
+    spans: Vec<[f32; 2]>,
+}
+
+impl PartSpans {
+    pub fn new(width: u32, height: u32) -> PartSpans {
+        PartSpans {
+            width,
+            height,
+            rows: [None; PART_COUNT],
+            spans: vec![[0.0; 2]; PART_COUNT * height as usize],
+        }
+    }
+
+    /// The rows part `i` was last spanned on (None: off-screen).
+    pub fn rows(&self, i: usize) -> Option<(u32, u32)> {
+        self.rows[i]
+    }
+
+    /// Part `i`'s span on row `y` (within [`PartSpans::rows`]), if any.
+    #[inline]
+    pub fn span(&self, i: usize, y: u32) -> Option<[f32; 2]> {
+        let s = self.spans[i * self.height as usize + y as usize];
+        (s[0] < s[1]).then_some(s)
+    }
+}
+
+/// Spans the parts of `body` whose indices `parts` lists into `out` (the other
+/// parts' spans are kept). Allocation-free.
+///
+/// # Panics
+/// When `out` is not the camera's size or an index is not a part's.
+pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out: &mut PartSpans) {
+    assert!(
+        out.width == cam.width && out.height == cam.height,
+        "span table size differs from the camera's"
+    );
+    let h = out.height as usize;
+    for &pi in parts {
+        let part = &body.parts[pi];
+        let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+        out.rows[pi] = None;
+        let Some(prep) = Prepared::new(part, &to_cam, cam) else {
+            continue;
+        };
+        for y in prep.y0..=prep.y1 {
+            out.spans[pi * h + y as usize] = match prep.row_interval(y, cam.width as f64) {
+                Some((lo, hi)) => [lo as f32, hi as f32],
+                None => [0.0; 2],
+            };
+        }
+        out.rows[pi] = Some((prep.y0 as u32, prep.y1 as u32));
+    }
 }
 
 fn draw_part(prep: &Prepared, mask: &mut Mask) {
@@ -904,6 +1037,25 @@ mod tests {
         (mask, differs)
     }
 
+    /// The standard body in the pose `unit` spreads within the joint limits (its first
+    /// two values also placing the root), `depth` cm in front of a 120×90 camera,
+    /// turned to `heading`.
+    fn any_pose(unit: &[f64], depth: f64, heading: f64) -> (Body, Posed, Camera) {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = params::rest_pose();
+        for (k, t) in unit.iter().enumerate().skip(params::ix::ROOT_RX) {
+            let m = &params::MOTION[k];
+            pose[k] = m.lo + t * (m.hi - m.lo);
+        }
+        pose[params::ix::ROOT_TX] = (unit[0] - 0.5) * 60.0;
+        pose[params::ix::ROOT_TY] = (unit[1] - 0.5) * 60.0;
+        pose[params::ix::ROOT_TZ] = -depth;
+        pose[params::ix::ROOT_RY] = heading;
+        let posed = body.skeleton.posed(&pose);
+        let cam = Camera::new(120, 90, 55.0).with_pose(IsometryMatrix3::identity());
+        (body, posed, cam)
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(200))]
 
@@ -916,20 +1068,66 @@ mod tests {
             depth in 150.0f64..600.0,
             heading in -180.0f64..180.0,
         ) {
-            let body = Body::new(&STANDARD_SHAPE);
-            let mut pose = params::rest_pose();
-            for (k, t) in unit.iter().enumerate().skip(params::ix::ROOT_RX) {
-                let m = &params::MOTION[k];
-                pose[k] = m.lo + t * (m.hi - m.lo);
-            }
-            pose[params::ix::ROOT_TX] = (unit[0] - 0.5) * 60.0;
-            pose[params::ix::ROOT_TY] = (unit[1] - 0.5) * 60.0;
-            pose[params::ix::ROOT_TZ] = -depth;
-            pose[params::ix::ROOT_RY] = heading;
-            let posed = body.skeleton.posed(&pose);
-            let cam = Camera::new(120, 90, 55.0).with_pose(IsometryMatrix3::identity());
+            let (body, posed, cam) = any_pose(&unit, depth, heading);
             let (_, differs) = render_against_ray_tests(&body, &posed, &cam);
             proptest::prop_assert_eq!(differs, None, "pixel (x, y) where the fast render differs");
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(40))]
+
+        /// Poses as above: each part's real span on each row holds the points of the
+        /// row's centre line, sampled 64 to a pixel, whose rays meet the part, to
+        /// within 1/16 of a pixel at either end (a cylinder's sliver narrower than a
+        /// pixel may be missed whole).
+        #[test]
+        fn spans_match_dense_ray_tests_along_each_row(
+            unit in proptest::collection::vec(0.0f64..1.0, params::MOTION_COUNT),
+            depth in 150.0f64..600.0,
+            heading in -180.0f64..180.0,
+        ) {
+            let (body, posed, cam) = any_pose(&unit, depth, heading);
+            let mut spans = PartSpans::new(cam.width, cam.height);
+            let all: Vec<usize> = (0..PART_COUNT).collect();
+            span_parts(&body, &posed, &cam, &all, &mut spans);
+            let k = 64;
+            for (i, part) in body.parts.iter().enumerate() {
+                let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+                let prep = Prepared::new(part, &to_cam, &cam);
+                for y in 0..cam.height {
+                    // The samples along the row's centre line whose rays meet the part.
+                    let hit: Vec<f64> = match &prep {
+                        Some(p) => (0..cam.width * k)
+                            .map(|s| (s as f64 + 0.5) / k as f64)
+                            .filter(|&u| p.hits(&(p.row_base(y as f64 + 0.5) + u * p.p)))
+                            .collect(),
+                        None => Vec::new(),
+                    };
+                    let got = spans
+                        .rows(i)
+                        .filter(|(a, b)| (*a..=*b).contains(&y))
+                        .and_then(|_| spans.span(i, y));
+                    let tol = 1.0 / 16.0;
+                    match (hit.first(), hit.last(), got) {
+                        (Some(&lo), Some(&hi), Some([a, b])) => {
+                            proptest::prop_assert!(
+                                (a as f64 - lo).abs() < tol && (b as f64 - hi).abs() < tol,
+                                "part {} row {}: [{}, {}] against [{}, {}]", i, y, a, b, lo, hi
+                            );
+                        }
+                        (Some(&lo), Some(&hi), None) => proptest::prop_assert!(
+                            part.kind == Kind::Cylinder && hi - lo < 1.0,
+                            "part {} row {}: missed [{}, {}]", i, y, lo, hi
+                        ),
+                        (None, _, Some([a, b])) => proptest::prop_assert!(
+                            b - a < 2.0 * tol as f32,
+                            "part {} row {}: [{}, {}] where no sample hits", i, y, a, b
+                        ),
+                        _ => {}
+                    }
+                }
+            }
         }
     }
 }

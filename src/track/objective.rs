@@ -23,13 +23,13 @@
 use super::outlines::FrameEdges;
 use crate::body::params::{within_limits, Pose};
 use crate::body::parts::Material;
-use crate::body::raster::{render_fragments, render_parts, Fragments, Mask};
+use crate::body::raster::{render_fragments, render_parts, span_parts, Fragments, Mask, PartSpans};
 use crate::body::skeleton::{joints_moved_by, Joint, Posed, Tip, JOINT_COUNT};
 use crate::body::{Body, Camera, PART_COUNT};
 use crate::vision::features::{ExtremityKind, FrameFeatures};
 use crate::vision::skin::SkinModel;
 use nalgebra::Point3;
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 
 /// The largest [`Weights::skin`].
 pub const MAX_SKIN_WEIGHT: f64 = 1000.0;
@@ -74,6 +74,17 @@ pub struct Weights {
     /// [`MAX_SKIN_WEIGHT`]); it applies once the tracker has learned the clip's
     /// skin colour ([`Target::add_skin`]).
     pub skin: f64,
+    /// Count the pixels on a part's outline by the share of their row's centre line
+    /// the part covers ([`crate::body::raster::PartSpans`]) rather than whole or not
+    /// at all, so that the cost changes smoothly as a part moves by less than a
+    /// pixel (while tracking; the initialisation counts whole pixels, as the paper
+    /// does). Off by default: over the accuracy benchmark's six runs (seeds 1–3,
+    /// with and without a person-free lead-in) against whole pixels, model IoU
+    /// 0.889 → 0.903, PCK@0.1 with swaps 0.946 → 0.954, PA-MPJPE with the
+    /// ambiguities allowed 100.4 → 98.2 mm, but plain PA-MPJPE 115.0 → 115.5 mm,
+    /// PCK@0.1 0.862 → 0.861, and 28% slower (README, "Whole pixels or shares of
+    /// them").
+    pub smooth: bool,
 }
 
 impl Default for Weights {
@@ -86,6 +97,7 @@ impl Default for Weights {
             track_rewards: false,
             outline: OUTLINE_WEIGHT,
             skin: 0.0,
+            smooth: false,
         }
     }
 }
@@ -133,6 +145,31 @@ pub struct Target {
     /// What a bare part covering each pixel adds (≤ 0); empty until
     /// [`Target::add_skin`].
     skin_gain: Vec<f32>,
+    /// The gain maps' row-by-row running sums, for [`Weights::smooth`] (made on
+    /// first use).
+    sums: OnceLock<RunningSums>,
+}
+
+/// Each gain map's running sums along its rows: `width + 1` per row, the entry at
+/// x the sum of the row's first x pixels.
+#[derive(Clone, Debug)]
+struct RunningSums {
+    gain: Vec<f32>,
+    limb: Vec<f32>,
+    skin: Vec<f32>,
+}
+
+fn running_sums(map: &[f32], width: usize) -> Vec<f32> {
+    let mut out = Vec::with_capacity(map.len() / width.max(1) * (width + 1));
+    for row in map.chunks(width.max(1)) {
+        let mut acc = 0f32;
+        out.push(0.0);
+        for &g in row {
+            acc += g;
+            out.push(acc);
+        }
+    }
+    out
 }
 
 impl Target {
@@ -206,7 +243,19 @@ impl Target {
             edges: f.colour_edges.then(|| FrameEdges::new(&f.edges, s)),
             colours: f.colours.clone(),
             skin_gain: Vec::new(),
+            sums: OnceLock::new(),
         }
+    }
+
+    fn sums(&self) -> &RunningSums {
+        self.sums.get_or_init(|| {
+            let w = self.width as usize;
+            RunningSums {
+                gain: running_sums(&self.gain, w),
+                limb: running_sums(&self.limb_gain, w),
+                skin: running_sums(&self.skin_gain, w),
+            }
+        })
     }
 
     /// Rewards the model's bare parts for covering pixels of skin colour: −`weight`
@@ -226,6 +275,7 @@ impl Target {
             .iter()
             .map(|&b| -(weight as f32) * (2.0 * model.p(b) - 1.0).max(0.0))
             .collect();
+        self.sums = OnceLock::new();
     }
 
     /// The same frame under the paper's objective (the initialisation's), the
@@ -236,6 +286,7 @@ impl Target {
             return None;
         }
         let mut t = self.clone();
+        t.sums = OnceLock::new();
         for (i, edge, region) in std::mem::take(&mut t.withheld) {
             t.gain[i] += edge;
             t.limb_gain[i] = region;
@@ -313,6 +364,9 @@ pub struct Evaluator<'a> {
     /// (the others are copied from `base`, the focused pose posed in full).
     moved: Option<[bool; JOINT_COUNT]>,
     base: Posed,
+    /// The layers counted by the share of each row the model covers
+    /// ([`Weights::smooth`]), used instead of `all`, `limbs` and `skin`.
+    smooth: Option<Box<Smooth>>,
     /// Evaluations so far.
     pub evals: u64,
 }
@@ -343,6 +397,9 @@ impl<'a> Evaluator<'a> {
             posed: Posed::default(),
             moved: None,
             base: Posed::default(),
+            smooth: weights
+                .smooth
+                .then(|| Box::new(Smooth::new(body, cam, target))),
             evals: 0,
         }
     }
@@ -362,6 +419,10 @@ impl<'a> Evaluator<'a> {
             .collect();
         self.body.skeleton.pose(pose, &mut self.base);
         self.moved = Some(moves);
+        if let Some(sm) = &mut self.smooth {
+            sm.focus(self.body, &self.base, self.cam, self.target, &moves);
+            return;
+        }
         self.all.fix(
             self.body,
             &self.base,
@@ -393,6 +454,10 @@ impl<'a> Evaluator<'a> {
     /// Every part moves again.
     pub fn unfocus(&mut self) {
         self.moved = None;
+        if let Some(sm) = &mut self.smooth {
+            sm.unfocus();
+            return;
+        }
         self.all.unfix((0..PART_COUNT).filter(|&i| !is_limb(i)));
         self.limbs.unfix((0..PART_COUNT).filter(|&i| is_limb(i)));
         let body = self.body;
@@ -416,6 +481,10 @@ impl<'a> Evaluator<'a> {
         }
         if self.below_ground() {
             return f64::INFINITY;
+        }
+        if let Some(sm) = &mut self.smooth {
+            let covered = sm.sum(self.body, &self.posed, self.cam, self.target);
+            return self.target.base + covered + self.weights.extremity * self.end_distances();
         }
         let mut total = self.target.base + self.all.fixed_sum + self.limbs.fixed_sum;
         if let Some(skin) = &mut self.skin {
@@ -640,6 +709,312 @@ impl Layer {
     }
 }
 
+/// The parts' silhouettes summed against the gain maps by the share of each row's
+/// centre line they cover ([`Weights::smooth`]).
+struct Smooth {
+    spans: PartSpans,
+    rows: RowBuckets,
+    /// The parts that move (all of them unless focused).
+    moving: Vec<usize>,
+    /// The whole model (G), its arms and legs (the region term) and its bare parts
+    /// (the skin term, when the target has one).
+    all: SpanLayer,
+    limbs: SpanLayer,
+    skin: Option<SpanLayer>,
+}
+
+impl Smooth {
+    fn new(body: &Body, cam: &Camera, target: &Target) -> Smooth {
+        let members = |f: &dyn Fn(usize) -> bool| std::array::from_fn(f);
+        Smooth {
+            spans: PartSpans::new(cam.width, cam.height),
+            rows: RowBuckets::new(cam.height),
+            moving: (0..PART_COUNT).collect(),
+            all: SpanLayer::new(cam, members(&|_| true)),
+            limbs: SpanLayer::new(cam, members(&is_limb)),
+            skin: (!target.skin_gain.is_empty())
+                .then(|| SpanLayer::new(cam, members(&|i| is_bare(body, i)))),
+        }
+    }
+
+    fn layers(&mut self) -> impl Iterator<Item = (&mut SpanLayer, usize)> {
+        [(&mut self.all, 0), (&mut self.limbs, 1)]
+            .into_iter()
+            .chain(self.skin.as_mut().map(|s| (s, 2)))
+    }
+
+    fn focus(
+        &mut self,
+        body: &Body,
+        base: &Posed,
+        cam: &Camera,
+        target: &Target,
+        moves: &[bool; JOINT_COUNT],
+    ) {
+        let moving = |i: usize| moves[body.parts[i].joint.index()];
+        let fixed: Vec<usize> = (0..PART_COUNT).filter(|&i| !moving(i)).collect();
+        self.moving = (0..PART_COUNT).filter(|&i| moving(i)).collect();
+        span_parts(body, base, cam, &fixed, &mut self.spans);
+        let sums = target.sums();
+        let spans = &self.spans;
+        for (layer, k) in [(&mut self.all, 0), (&mut self.limbs, 1)]
+            .into_iter()
+            .chain(self.skin.as_mut().map(|s| (s, 2)))
+        {
+            let (gain, run) = maps(target, sums, k);
+            layer.fix(spans, &fixed, gain, run);
+        }
+    }
+
+    fn unfocus(&mut self) {
+        self.moving = (0..PART_COUNT).collect();
+        for (layer, _) in self.layers() {
+            layer.unfix();
+        }
+    }
+
+    /// Σ of the gain maps over the model at `posed` (without the base).
+    fn sum(&mut self, body: &Body, posed: &Posed, cam: &Camera, target: &Target) -> f64 {
+        span_parts(body, posed, cam, &self.moving, &mut self.spans);
+        let sums = target.sums();
+        let (spans, moving, rows) = (&self.spans, &self.moving, &mut self.rows);
+        let mut total = 0.0;
+        for (layer, k) in [(&self.all, 0), (&self.limbs, 1)]
+            .into_iter()
+            .chain(self.skin.as_ref().map(|s| (s, 2)))
+        {
+            let (gain, run) = maps(target, sums, k);
+            total += layer.fixed_sum + layer.sum(spans, moving, rows, gain, run);
+        }
+        total
+    }
+}
+
+/// Gain map `k` (0 the whole model's, 1 the limbs', 2 the skin's) and its running sums.
+fn maps<'t>(target: &'t Target, sums: &'t RunningSums, k: usize) -> (&'t [f32], &'t [f32]) {
+    match k {
+        0 => (&target.gain, &sums.gain),
+        1 => (&target.limb_gain, &sums.limb),
+        _ => (&target.skin_gain, &sums.skin),
+    }
+}
+
+/// Most intervals one row of a layer can hold: every part's, moving and fixed.
+const ROW_CAP: usize = 2 * PART_COUNT;
+
+/// One gain map's share of the smooth objective: its parts, the union of those that
+/// stay put while a search is focused, row by row, and that union's sum.
+struct SpanLayer {
+    members: [bool; PART_COUNT],
+    width: usize,
+    /// The fixed parts' union: row y's disjoint intervals, in order, are
+    /// `fixed[off[y]..off[y + 1]]`, and their sum `fixed_row[y]`.
+    fixed: Vec<[f32; 2]>,
+    off: Vec<u32>,
+    fixed_row: Vec<f32>,
+    fixed_sum: f64,
+}
+
+impl SpanLayer {
+    fn new(cam: &Camera, members: [bool; PART_COUNT]) -> SpanLayer {
+        let h = cam.height as usize;
+        SpanLayer {
+            members,
+            width: cam.width as usize,
+            fixed: Vec::new(),
+            off: vec![0; h + 1],
+            fixed_row: vec![0.0; h],
+            fixed_sum: 0.0,
+        }
+    }
+
+    fn unfix(&mut self) {
+        self.fixed.clear();
+        self.off.fill(0);
+        self.fixed_row.fill(0.0);
+        self.fixed_sum = 0.0;
+    }
+
+    fn fix(&mut self, spans: &PartSpans, fixed: &[usize], gain: &[f32], run: &[f32]) {
+        self.unfix();
+        let h = self.fixed_row.len();
+        let mut buf = [[0f32; 2]; ROW_CAP];
+        let mut total = 0.0;
+        for y in 0..h {
+            let mut n = 0;
+            for &i in fixed {
+                if !self.members[i] {
+                    continue;
+                }
+                if let Some((y0, y1)) = spans.rows(i) {
+                    if (y0..=y1).contains(&(y as u32)) {
+                        if let Some(s) = spans.span(i, y as u32) {
+                            buf[n] = s;
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            sort_spans(&mut buf[..n]);
+            let row_sum = union_sum(&buf[..n], &[], |a, b| {
+                self.fixed.push([a, b]);
+                integral(gain, run, self.width, y, a, b)
+            });
+            self.off[y + 1] = self.fixed.len() as u32;
+            self.fixed_row[y] = row_sum;
+            total += row_sum as f64;
+        }
+        self.fixed_sum = total;
+    }
+
+    /// What the moving parts add to the fixed parts' sum; `rows` is scratch.
+    fn sum(
+        &self,
+        spans: &PartSpans,
+        moving: &[usize],
+        rows: &mut RowBuckets,
+        gain: &[f32],
+        run: &[f32],
+    ) -> f64 {
+        let Some((y0, y1)) = rows.gather(spans, moving, &self.members) else {
+            return 0.0;
+        };
+        let mut total = 0f32;
+        for y in y0..=y1 {
+            let yi = y as usize;
+            let Some(moving) = rows.sorted_row(yi) else {
+                continue;
+            };
+            let fixed = &self.fixed[self.off[yi] as usize..self.off[yi + 1] as usize];
+            let row = union_sum(moving, fixed, |a, b| {
+                integral(gain, run, self.width, yi, a, b)
+            });
+            total += row - self.fixed_row[yi];
+        }
+        total as f64
+    }
+}
+
+/// The moving parts' spans sorted into their rows (scratch, reused).
+struct RowBuckets {
+    count: Vec<u8>,
+    spans: Vec<[f32; 2]>,
+}
+
+impl RowBuckets {
+    fn new(height: u32) -> RowBuckets {
+        RowBuckets {
+            count: vec![0; height as usize],
+            spans: vec![[0.0; 2]; height as usize * PART_COUNT],
+        }
+    }
+
+    /// Buckets the spans of the parts of `moving` that are `members`; the rows
+    /// they span (None when none is on screen).
+    fn gather(
+        &mut self,
+        spans: &PartSpans,
+        moving: &[usize],
+        members: &[bool; PART_COUNT],
+    ) -> Option<(u32, u32)> {
+        let mut rows: Option<(u32, u32)> = None;
+        for &i in moving {
+            if let (true, Some((a, b))) = (members[i], spans.rows(i)) {
+                match rows {
+                    Some((lo, hi)) => {
+                        // Rows not yet touched start empty (with any gap between).
+                        for y in (a..lo).chain(hi + 1..=b) {
+                            self.count[y as usize] = 0;
+                        }
+                        rows = Some((lo.min(a), hi.max(b)));
+                    }
+                    None => {
+                        self.count[a as usize..=b as usize].fill(0);
+                        rows = Some((a, b));
+                    }
+                }
+                for y in a..=b {
+                    if let Some(s) = spans.span(i, y) {
+                        let c = &mut self.count[y as usize];
+                        self.spans[y as usize * PART_COUNT + *c as usize] = s;
+                        *c += 1;
+                    }
+                }
+            }
+        }
+        rows
+    }
+
+    /// Row `y`'s spans in order, if it has any.
+    fn sorted_row(&mut self, y: usize) -> Option<&[[f32; 2]]> {
+        let n = self.count[y] as usize;
+        if n == 0 {
+            return None;
+        }
+        let row = &mut self.spans[y * PART_COUNT..y * PART_COUNT + n];
+        sort_spans(row);
+        Some(row)
+    }
+}
+
+/// Sorts spans by their start (insertion sort: a row holds a few).
+#[inline]
+fn sort_spans(iv: &mut [[f32; 2]]) {
+    for i in 1..iv.len() {
+        let mut j = i;
+        while j > 0 && iv[j - 1][0] > iv[j][0] {
+            iv.swap(j - 1, j);
+            j -= 1;
+        }
+    }
+}
+
+/// Σ of `f` over the union of two lists of intervals, each in order of their
+/// starts, each disjoint piece of the union once.
+#[inline]
+fn union_sum(a: &[[f32; 2]], b: &[[f32; 2]], mut f: impl FnMut(f32, f32) -> f32) -> f32 {
+    let (mut i, mut j) = (0, 0);
+    let mut next = || {
+        let take_a = j >= b.len() || (i < a.len() && a[i][0] <= b[j][0]);
+        if take_a {
+            i += 1;
+            a.get(i - 1).copied()
+        } else {
+            j += 1;
+            b.get(j - 1).copied()
+        }
+    };
+    let Some([mut lo, mut hi]) = next() else {
+        return 0.0;
+    };
+    let mut total = 0.0;
+    while let Some([l, h]) = next() {
+        if l > hi {
+            total += f(lo, hi);
+            (lo, hi) = (l, h);
+        } else if h > hi {
+            hi = h;
+        }
+    }
+    total + f(lo, hi)
+}
+
+/// ∫ of row `y` of the gain map over columns `[a, b]` (0 ≤ a ≤ b ≤ width), a pixel
+/// counting by the share of it the interval covers.
+#[inline]
+fn integral(gain: &[f32], run: &[f32], width: usize, y: usize, a: f32, b: f32) -> f32 {
+    let at = |u: f32| {
+        let x = (u as usize).min(width);
+        let p = run[y * (width + 1) + x];
+        if x < width {
+            p + (u - x as f32) * gain[y * width + x]
+        } else {
+            p
+        }
+    };
+    at(b) - at(a)
+}
+
 /// Whether part `i` belongs to an arm or a leg (the parts the region term rewards,
 /// Eq. 6: the arm and leg regions are where the model's limbs should be).
 fn is_limb(i: usize) -> bool {
@@ -770,6 +1145,72 @@ mod tests {
         assert!(
             (focused - full).abs() < 1e-6 * full.abs(),
             "{focused} vs {full}"
+        );
+    }
+
+    #[test]
+    fn the_smooth_cost_is_the_pixel_cost_without_its_steps() {
+        let (body, cam, pose) = scene();
+        let (_, target) = target_of(&body, &cam, &pose);
+        let smooth = Weights {
+            smooth: true,
+            ..Weights::paper()
+        };
+        let mut px = Evaluator::new(&body, &cam, &target, Weights::paper(), None);
+        let mut sm = Evaluator::new(&body, &cam, &target, smooth, None);
+        // Near the pixel cost, at the truth and away from it: where a row of the
+        // pixel render goes in or out, the smooth one covers a share of the two
+        // pixels either side instead, so it differs by at most their gains.
+        let mut away = pose;
+        away[ix::L_ELBOW] = 60.0;
+        away[ix::ROOT_TX] += 7.0;
+        for p in [pose, away] {
+            let (a, b) = (px.cost(&p), sm.cost(&p));
+            let mut m = Mask::new(cam.width, cam.height);
+            px.render(&p, &mut m);
+            let g = |x: u32, y: u32| (target.gain[(y * cam.width + x) as usize]).abs() as f64;
+            let mut bound = 0.0;
+            for y in 0..cam.height {
+                for x in 1..cam.width {
+                    if m.get(x - 1, y) != m.get(x, y) {
+                        bound += g(x - 1, y) + g(x, y);
+                    }
+                }
+            }
+            assert!(a != b, "the smooth cost is the pixel cost");
+            assert!((a - b).abs() <= bound, "{a} vs {b}, at most {bound} apart");
+        }
+        // Focused on the left arm, the same function.
+        let arm: Vec<usize> = (ix::L_SHOULDER..ix::L_SHOULDER + 4).collect();
+        sm.focus(&pose, &arm);
+        let mut bent = pose;
+        bent[ix::L_ELBOW] = 90.0;
+        let focused = sm.cost(&bent);
+        sm.unfocus();
+        let full = sm.cost(&bent);
+        assert!(
+            (focused - full).abs() < 1e-4 * full.abs(),
+            "{focused} vs {full}"
+        );
+        // Slid sideways by 1/50 cm at a time (about 1/65 of a pixel): the pixel
+        // cost jumps as outlines cross pixel centres; the smooth one moves a little
+        // every step, by far less.
+        let (mut px_jump, mut sm_jump) = (0f64, 0f64);
+        let mut last: Option<(f64, f64)> = None;
+        for k in 0..100 {
+            let mut p = away;
+            p[ix::ROOT_TX] += 0.02 * k as f64;
+            let (a, b) = (px.cost(&p), sm.cost(&p));
+            if let Some((la, lb)) = last {
+                px_jump = px_jump.max((a - la).abs());
+                sm_jump = sm_jump.max((b - lb).abs());
+                assert!(b != lb, "step {k}: the smooth cost did not move");
+            }
+            last = Some((a, b));
+        }
+        assert!(
+            sm_jump < 0.2 * px_jump,
+            "largest step {sm_jump} smooth against {px_jump} in pixels"
         );
     }
 

@@ -1022,7 +1022,7 @@ impl Tracker {
 
         // Each heading's fit is independent of the others': side by side.
         let threads = self.threads();
-        let wide = || Search::new(self, &standard, f64::NEG_INFINITY);
+        let wide = || Search::initial(self, &standard);
         let headings: Vec<i32> = (0..12).collect();
         let mut fits: Vec<(f64, Pose)> = par_map(&headings, threads, |&k| {
             let mut p = base;
@@ -1061,9 +1061,7 @@ impl Tracker {
         let mut shape = known.unwrap_or(STANDARD_SHAPE);
         let rounds = if known.is_some() {
             let body = Body::new(&shape);
-            pose = Search::new(self, &body, f64::NEG_INFINITY)
-                .fit_wide(target, pose, 3)
-                .0;
+            pose = Search::initial(self, &body).fit_wide(target, pose, 3).0;
             0
         } else {
             3
@@ -1090,7 +1088,11 @@ impl Tracker {
                     let mut p = fixed;
                     p[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&x[SHAPE_COUNT..]);
                     let body = Body::new(&s);
-                    Evaluator::new(&body, cam, target, self.opts.weights, None).cost(&p)
+                    let w = Weights {
+                        smooth: false,
+                        ..self.opts.weights
+                    };
+                    Evaluator::new(&body, cam, target, w, None).cost(&p)
                 },
                 &x0,
                 &steps,
@@ -1101,14 +1103,12 @@ impl Tracker {
             shape.copy_from_slice(&r.x[..SHAPE_COUNT]);
             pose[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&r.x[SHAPE_COUNT..]);
             let body = Body::new(&shape);
-            pose = Search::new(self, &body, f64::NEG_INFINITY)
-                .fit_wide(target, pose, 2)
-                .0;
+            pose = Search::initial(self, &body).fit_wide(target, pose, 2).0;
         }
         let mut poses = vec![pose];
         if let Some(o) = other.filter(|_| !self.stopping()) {
             let body = Body::new(&shape);
-            let s = Search::new(self, &body, f64::NEG_INFINITY);
+            let s = Search::initial(self, &body);
             let mut o = o;
             o[ix::ROOT_TX..=ix::ROOT_TZ].copy_from_slice(&pose[ix::ROOT_TX..=ix::ROOT_TZ]);
             poses.push(s.fit_wide(target, o, 3).0);
@@ -1662,6 +1662,8 @@ struct Search<'a> {
     /// Carry every parameter's velocity into each frame's start
     /// ([`TrackOptions::joint_velocity`]; always for the probes).
     joint_velocity: bool,
+    /// The objective's weights: the tracker's, whole pixels in the initialisation.
+    weights: Weights,
 }
 
 impl<'a> Search<'a> {
@@ -1675,7 +1677,16 @@ impl<'a> Search<'a> {
             outlines: std::cell::RefCell::new(None),
             weigh_outlines: true,
             joint_velocity: tracker.opts.joint_velocity,
+            weights: tracker.opts.weights,
         }
+    }
+
+    /// A search for the initialisation, which counts whole pixels
+    /// ([`Weights::smooth`]).
+    fn initial(tracker: &'a Tracker, body: &'a Body) -> Search<'a> {
+        let mut s = Search::new(tracker, body, f64::NEG_INFINITY);
+        s.weights.smooth = false;
+        s
     }
 
     /// Whether this search weighs the inner outlines in on `target`: a colour
@@ -1707,7 +1718,7 @@ impl<'a> Search<'a> {
             self.body,
             &self.tracker.camera,
             target,
-            self.tracker.opts.weights,
+            self.weights,
             ground,
         )
     }
