@@ -364,19 +364,8 @@ impl Prepared {
         if a >= -1e-18 {
             return Some(None);
         }
-        let disc = b * b - 4.0 * a * c;
-        if disc < 0.0 {
-            return None;
-        }
-        let s = disc.sqrt();
-        // Stable roots of a·u² + b·u + c; a < 0, so the test passes between them.
-        let qq = -0.5 * (b + b.signum() * s);
-        let (r1, r2) = if qq != 0.0 {
-            (qq / a, c / qq)
-        } else {
-            (0.0, 0.0)
-        };
-        Some(Some((r1.min(r2), r1.max(r2))))
+        // a < 0, so the test passes between the roots.
+        quadratic_roots(a, b, c).map(Some)
     }
 
     /// The inclusive pixel span of a row where the quadratic's test passes, clipped
@@ -402,14 +391,85 @@ impl Prepared {
 
     /// The part's span on row `y`'s centre line as real columns `[lo, hi]` (pixel x
     /// covers `[x, x + 1)`), clipped to `[0, width]`: the exact roots for an
-    /// ellipsoid; for a cylinder the hull's roots, each end its caps trim found to
-    /// 1/64 of a pixel by bisection. A sliver of a cylinder between two pixel
-    /// centres is missed.
+    /// ellipsoid; for a cylinder the hull's roots where the ray grazing the hull
+    /// touches it between the caps, else the ends of the caps' own spans
+    /// ([`Prepared::cylinder_row`]). Where those quadratics degenerate, each end is
+    /// found to 1/64 of a pixel by bisection ([`Prepared::bisected_row`]).
     fn row_interval(&self, y: i64, width: f64) -> Option<(f64, f64)> {
         let r = self.row_base(y as f64 + 0.5);
-        let (lo, hi, exact) = match self.row_roots(&r)? {
+        let (lo, hi) = match self.row_roots(&r)? {
+            Some((lo, hi)) if self.kind == Kind::Ellipsoid => (lo, hi),
+            Some((lo, hi)) => match self.cylinder_row(&r, lo, hi) {
+                Some(Some(iv)) => iv,
+                Some(None) => return self.bisected_row(&r, Some((lo, hi)), width),
+                None => return None,
+            },
+            None => return self.bisected_row(&r, None, width),
+        };
+        let (lo, hi) = (lo.max(0.0), hi.min(width));
+        (lo < hi).then_some((lo, hi))
+    }
+
+    /// A cylinder's span along the row `r` inside its hull's span `[lo, hi]`: None
+    /// when the row misses it, `Some(None)` when a quadratic degenerates. The
+    /// cylinder is the convex hull of its two caps, so each end of its span is
+    /// either the hull's (where the ray grazing the side touches it at a height
+    /// between the caps) or a cap's rim (the end of that cap's span).
+    fn cylinder_row(&self, r: &Vector3<f64>, lo: f64, hi: f64) -> Option<Option<(f64, f64)>> {
+        let o = &self.o;
+        // Whether the ray at u, tangent to the side, touches it between the caps.
+        let grazes = |u: f64| {
+            let (a, b, _) = side_quadratic(o, &(r + u * self.p));
+            if a < 1e-18 {
+                return None;
+            }
+            let y = o.y - b / a * (r.y + u * self.p.y);
+            Some((0.0..=1.0).contains(&y))
+        };
+        let (Some(lo_in), Some(hi_in)) = (grazes(lo), grazes(hi)) else {
+            return Some(None);
+        };
+        // Each cap's span: where the ray meets the plane y = c inside the unit
+        // circle, (o.x·d.y + s·d.x)² + (o.z·d.y + s·d.z)² ≤ d.y² with s = c − o.y,
+        // a quadratic in u with d = r + u·p.
+        let mut caps: Option<(f64, f64)> = None;
+        for c in [0.0, 1.0] {
+            let s = c - o.y;
+            let (p, q) = (&self.p, r);
+            let (x0, x1) = (o.x * q.y + s * q.x, o.x * p.y + s * p.x);
+            let (z0, z1) = (o.z * q.y + s * q.z, o.z * p.y + s * p.z);
+            let a = x1 * x1 + z1 * z1 - p.y * p.y;
+            if a <= 0.0 {
+                // Not an ellipse in the image (a cap seen edge-on).
+                return Some(None);
+            }
+            let b = 2.0 * (x0 * x1 + z0 * z1 - q.y * p.y);
+            let cc = x0 * x0 + z0 * z0 - q.y * q.y;
+            if let Some((l, h)) = quadratic_roots(a, b, cc) {
+                caps = Some(caps.map_or((l, h), |(cl, ch)| (cl.min(l), ch.max(h))));
+            }
+        }
+        let (l, h) = match (lo_in, hi_in, caps) {
+            (true, true, _) => (lo, hi),
+            (true, false, Some((_, ch))) => (lo, ch.min(hi)),
+            (false, true, Some((cl, _))) => (cl.max(lo), hi),
+            (false, false, Some((cl, ch))) => (cl.max(lo), ch.min(hi)),
+            (_, _, None) => return None,
+        };
+        Some((l < h).then_some((l, h)))
+    }
+
+    /// A cylinder's span along the row `r` found by ray tests: inside the hull's
+    /// span (None: the whole box), each end bisected to 1/64 of a pixel, clipped
+    /// to `[0, width]`. A sliver between two pixel centres is missed.
+    fn bisected_row(
+        &self,
+        r: &Vector3<f64>,
+        hull: Option<(f64, f64)>,
+        width: f64,
+    ) -> Option<(f64, f64)> {
+        let (lo, hi, exact) = match hull {
             Some((lo, hi)) => (lo.max(0.0), hi.min(width), true),
-            // Degenerate (see `row_span`): the box, each end found by the ray test.
             None => (
                 (self.x0 as f64 - 0.5).max(0.0),
                 (self.x1 as f64 + 1.5).min(width),
@@ -418,9 +478,6 @@ impl Prepared {
         };
         if lo >= hi {
             return None;
-        }
-        if exact && self.kind == Kind::Ellipsoid {
-            return Some((lo, hi));
         }
         let dir = |u: f64| r + u * self.p;
         let (first, last) = (ceil_i64(lo - 0.5), floor_i64(hi - 0.5));
@@ -459,6 +516,7 @@ impl Prepared {
         } else {
             edge(hi.min(x1 as f64 + 1.5), x1 as f64 + 0.5)
         };
+        let (l, h) = (l.max(0.0), h.min(width));
         (l < h).then_some((l, h))
     }
 
@@ -529,6 +587,23 @@ fn floor_i64(x: f64) -> i64 {
     } else {
         t
     }
+}
+
+/// The real roots of a·u² + b·u + c (a ≠ 0) in order, computed stably; None when
+/// there are none.
+#[inline]
+fn quadratic_roots(a: f64, b: f64, c: f64) -> Option<(f64, f64)> {
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let qq = -0.5 * (b + b.signum() * disc.sqrt());
+    let (r1, r2) = if qq != 0.0 {
+        (qq / a, c / qq)
+    } else {
+        (0.0, 0.0)
+    };
+    Some((r1.min(r2), r1.max(r2)))
 }
 
 /// The ray o + t·d against a canonical cylinder's infinite side (x² + z² = 1):
