@@ -367,6 +367,9 @@ pub struct Evaluator<'a> {
     /// The layers counted by the share of each row the model covers
     /// ([`Weights::smooth`]), used instead of `all`, `limbs` and `skin`.
     smooth: Option<Box<Smooth>>,
+    /// The limbs' gain map is all zero: the limbs are drawn (they are part of the
+    /// model) but their own layer is not summed.
+    limb_free: bool,
     /// Evaluations so far.
     pub evals: u64,
 }
@@ -384,6 +387,9 @@ impl<'a> Evaluator<'a> {
             (target.width, target.height),
             "camera and frame sizes differ"
         );
+        // Tracking without rewards leaves the limbs' map all zero: their layer
+        // would add nothing.
+        let limb_free = target.limb_gain.iter().all(|&g| g == 0.0);
         Evaluator {
             body,
             cam,
@@ -399,7 +405,8 @@ impl<'a> Evaluator<'a> {
             base: Posed::default(),
             smooth: weights
                 .smooth
-                .then(|| Box::new(Smooth::new(body, cam, target))),
+                .then(|| Box::new(Smooth::new(body, cam, target, !limb_free))),
+            limb_free,
             evals: 0,
         }
     }
@@ -430,13 +437,15 @@ impl<'a> Evaluator<'a> {
             &fixed_all,
             &self.target.gain,
         );
-        self.limbs.fix(
-            self.body,
-            &self.base,
-            self.cam,
-            &fixed_limbs,
-            &self.target.limb_gain,
-        );
+        if !self.limb_free {
+            self.limbs.fix(
+                self.body,
+                &self.base,
+                self.cam,
+                &fixed_limbs,
+                &self.target.limb_gain,
+            );
+        }
         if let Some(skin) = &mut self.skin {
             let body = self.body;
             skin.moving = (0..PART_COUNT)
@@ -518,7 +527,7 @@ impl<'a> Evaluator<'a> {
             &self.limbs.moving,
             &mut self.limbs.scratch,
         );
-        if let Some((y0, y1)) = limb_rows {
+        if let (Some((y0, y1)), false) = (limb_rows, self.limb_free) {
             total += sum_over(
                 &self.target.limb_gain,
                 &self.limbs.scratch,
@@ -716,31 +725,29 @@ struct Smooth {
     rows: RowBuckets,
     /// The parts that move (all of them unless focused).
     moving: Vec<usize>,
-    /// The whole model (G), its arms and legs (the region term) and its bare parts
-    /// (the skin term, when the target has one).
-    all: SpanLayer,
-    limbs: SpanLayer,
-    skin: Option<SpanLayer>,
+    /// The whole model (G); its arms and legs (the region term) unless their gain
+    /// map is all zero (tracking without rewards); its bare parts (the skin term)
+    /// when the target has one.
+    layers: Vec<SpanLayer>,
 }
 
 impl Smooth {
-    fn new(body: &Body, cam: &Camera, target: &Target) -> Smooth {
-        let members = |f: &dyn Fn(usize) -> bool| std::array::from_fn(f);
+    fn new(body: &Body, cam: &Camera, target: &Target, limbs: bool) -> Smooth {
+        let layer =
+            |map, f: &dyn Fn(usize) -> bool| SpanLayer::new(cam, map, std::array::from_fn(f));
+        let mut layers = vec![layer(Map::All, &|_| true)];
+        if limbs {
+            layers.push(layer(Map::Limbs, &is_limb));
+        }
+        if !target.skin_gain.is_empty() {
+            layers.push(layer(Map::Skin, &|i| is_bare(body, i)));
+        }
         Smooth {
             spans: PartSpans::new(cam.width, cam.height),
             rows: RowBuckets::new(cam.height),
             moving: (0..PART_COUNT).collect(),
-            all: SpanLayer::new(cam, members(&|_| true)),
-            limbs: SpanLayer::new(cam, members(&is_limb)),
-            skin: (!target.skin_gain.is_empty())
-                .then(|| SpanLayer::new(cam, members(&|i| is_bare(body, i)))),
+            layers,
         }
-    }
-
-    fn layers(&mut self) -> impl Iterator<Item = (&mut SpanLayer, usize)> {
-        [(&mut self.all, 0), (&mut self.limbs, 1)]
-            .into_iter()
-            .chain(self.skin.as_mut().map(|s| (s, 2)))
     }
 
     fn focus(
@@ -756,19 +763,15 @@ impl Smooth {
         self.moving = (0..PART_COUNT).filter(|&i| moving(i)).collect();
         span_parts(body, base, cam, &fixed, &mut self.spans);
         let sums = target.sums();
-        let spans = &self.spans;
-        for (layer, k) in [(&mut self.all, 0), (&mut self.limbs, 1)]
-            .into_iter()
-            .chain(self.skin.as_mut().map(|s| (s, 2)))
-        {
-            let (gain, run) = maps(target, sums, k);
-            layer.fix(spans, &fixed, gain, run);
+        for layer in &mut self.layers {
+            let (gain, run) = layer.map.of(target, sums);
+            layer.fix(&self.spans, &fixed, gain, run);
         }
     }
 
     fn unfocus(&mut self) {
         self.moving = (0..PART_COUNT).collect();
-        for (layer, _) in self.layers() {
+        for layer in &mut self.layers {
             layer.unfix();
         }
     }
@@ -777,25 +780,32 @@ impl Smooth {
     fn sum(&mut self, body: &Body, posed: &Posed, cam: &Camera, target: &Target) -> f64 {
         span_parts(body, posed, cam, &self.moving, &mut self.spans);
         let sums = target.sums();
-        let (spans, moving, rows) = (&self.spans, &self.moving, &mut self.rows);
         let mut total = 0.0;
-        for (layer, k) in [(&self.all, 0), (&self.limbs, 1)]
-            .into_iter()
-            .chain(self.skin.as_ref().map(|s| (s, 2)))
-        {
-            let (gain, run) = maps(target, sums, k);
-            total += layer.fixed_sum + layer.sum(spans, moving, rows, gain, run);
+        for layer in &self.layers {
+            let (gain, run) = layer.map.of(target, sums);
+            total +=
+                layer.fixed_sum + layer.sum(&self.spans, &self.moving, &mut self.rows, gain, run);
         }
         total
     }
 }
 
-/// Gain map `k` (0 the whole model's, 1 the limbs', 2 the skin's) and its running sums.
-fn maps<'t>(target: &'t Target, sums: &'t RunningSums, k: usize) -> (&'t [f32], &'t [f32]) {
-    match k {
-        0 => (&target.gain, &sums.gain),
-        1 => (&target.limb_gain, &sums.limb),
-        _ => (&target.skin_gain, &sums.skin),
+/// Which of the target's gain maps a layer sums.
+#[derive(Clone, Copy, Debug)]
+enum Map {
+    All,
+    Limbs,
+    Skin,
+}
+
+impl Map {
+    /// The gain map and its running sums.
+    fn of<'t>(self, target: &'t Target, sums: &'t RunningSums) -> (&'t [f32], &'t [f32]) {
+        match self {
+            Map::All => (&target.gain, &sums.gain),
+            Map::Limbs => (&target.limb_gain, &sums.limb),
+            Map::Skin => (&target.skin_gain, &sums.skin),
+        }
     }
 }
 
@@ -805,6 +815,7 @@ const ROW_CAP: usize = 2 * PART_COUNT;
 /// One gain map's share of the smooth objective: its parts, the union of those that
 /// stay put while a search is focused, row by row, and that union's sum.
 struct SpanLayer {
+    map: Map,
     members: [bool; PART_COUNT],
     width: usize,
     /// The fixed parts' union: row y's disjoint intervals, in order, are
@@ -816,9 +827,10 @@ struct SpanLayer {
 }
 
 impl SpanLayer {
-    fn new(cam: &Camera, members: [bool; PART_COUNT]) -> SpanLayer {
+    fn new(cam: &Camera, map: Map, members: [bool; PART_COUNT]) -> SpanLayer {
         let h = cam.height as usize;
         SpanLayer {
+            map,
             members,
             width: cam.width as usize,
             fixed: Vec::new(),
@@ -1146,6 +1158,33 @@ mod tests {
             (focused - full).abs() < 1e-6 * full.abs(),
             "{focused} vs {full}"
         );
+    }
+
+    #[test]
+    fn without_rewards_the_cost_is_the_core_weighted_xor_and_the_ends() {
+        // Tracking's default target pays no edge or region reward, so the limbs'
+        // layer is not summed; nothing else may go missing with it.
+        let (body, cam, pose) = scene();
+        let (f, _) = target_of(&body, &cam, &pose);
+        let target = Target::new(&f, &Weights::default());
+        let whole = Weights {
+            smooth: false,
+            ..Weights::default()
+        };
+        let mut ev = Evaluator::new(&body, &cam, &target, whole, None);
+        let mut other = pose;
+        other[ix::L_ELBOW] = 60.0;
+        other[ix::ROOT_TX] += 7.0;
+        for p in [pose, other] {
+            let cost = ev.cost(&p);
+            let t = ev.terms(&p, &f);
+            let want = t.xor + t.extremity;
+            assert!(
+                (cost - want).abs() < 1e-3 * want.max(1.0),
+                "{cost} vs {want}"
+            );
+        }
+        assert!(ev.cost(&other) > ev.cost(&pose) + 100.0);
     }
 
     #[test]
