@@ -1637,7 +1637,8 @@ impl History {
     }
 
     fn push(&mut self, pose: Pose) {
-        self.before = Some(self.last);
+        // No velocity across a gap: the person may have come back elsewhere.
+        self.before = (!self.away).then_some(self.last);
         self.last = pose;
         self.away = false;
     }
@@ -1800,6 +1801,18 @@ impl<'a> Search<'a> {
             if f_sized < best_f {
                 start = sized;
                 best_f = f_sized;
+            }
+        }
+        // A start below the ground costs +∞, and so may every pose the search can
+        // reach from it (the body moved over a person who comes back after a gap
+        // can sink past the ground's slack): lift it onto the ground.
+        if !best_f.is_finite() {
+            let mut lifted = start;
+            self.lift_to_ground(&mut lifted);
+            let f = ev.cost(&lifted);
+            if f < best_f {
+                start = lifted;
+                best_f = f;
             }
         }
         // The reach of the search: acceleration limits around the prediction.
@@ -2088,6 +2101,14 @@ impl<'a> Search<'a> {
             *v *= k;
         }
         self.replace_over(ev, target, pose);
+    }
+
+    /// Raises the root so that the soles are no lower than the ground.
+    fn lift_to_ground(&self, pose: &mut Pose) {
+        let sole = sole_height(self.body, &self.body.posed(pose));
+        if self.ground.is_finite() && sole < self.ground {
+            pose[ix::ROOT_TY] += self.ground - sole;
+        }
     }
 
     /// The bounding boxes of the model's silhouette at `pose` and of the person.
