@@ -144,12 +144,12 @@ struct WeightArgs {
     /// model's bare parts cover (forearms, hands, neck, head); 0 for none
     #[arg(long, default_value_t = 0.0)]
     w_skin: f64,
-    /// While tracking, count a pixel on the model's outline by the share of its
-    /// row the model covers, so the cost changes smoothly as a part moves by less
-    /// than a pixel (the initialisation counts whole pixels): a closer fit to the
-    /// silhouettes, about 28% slower
+    /// Count whole pixels while tracking, as the paper does, instead of a pixel on
+    /// the model's outline by the share of its row the model covers (the default,
+    /// whose cost changes smoothly as a part moves by less than a pixel: a closer
+    /// fit to the silhouettes)
     #[arg(long)]
-    smooth: bool,
+    whole_pixels: bool,
 }
 
 impl WeightArgs {
@@ -177,7 +177,7 @@ impl WeightArgs {
         w.track_rewards = self.track_rewards;
         w.outline = self.w_outline;
         w.skin = self.w_skin;
-        w.smooth = self.smooth;
+        w.smooth = !self.whole_pixels;
         Ok(())
     }
 }
