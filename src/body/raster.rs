@@ -432,10 +432,10 @@ impl Prepared {
         // Each cap's span: where the ray meets the plane y = c inside the unit
         // circle, (o.x·d.y + s·d.x)² + (o.z·d.y + s·d.z)² ≤ d.y² with s = c − o.y,
         // a quadratic in u with d = r + u·p.
+        let (p, q) = (&self.p, r);
         let mut caps: Option<(f64, f64)> = None;
         for c in [0.0, 1.0] {
             let s = c - o.y;
-            let (p, q) = (&self.p, r);
             let (x0, x1) = (o.x * q.y + s * q.x, o.x * p.y + s * p.x);
             let (z0, z1) = (o.z * q.y + s * q.z, o.z * p.y + s * p.z);
             let a = x1 * x1 + z1 * z1 - p.y * p.y;
