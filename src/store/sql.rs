@@ -10,6 +10,8 @@ use std::time::Duration;
 
 use futures_util::future::BoxFuture;
 use sqlx::any::{AnyPoolOptions, AnyRow};
+use sqlx::migrate::{Migration, MigrationType, Migrator};
+use sqlx::SqlStr;
 use sqlx::{AnyPool, Executor, Row};
 
 use super::{
@@ -65,13 +67,61 @@ impl SqlStore {
             .connect(url)
             .await
             .map_err(|e| anyhow::anyhow!("cannot open the database {shown}: {e}"))?;
-        let migrated = match backend {
-            Backend::Sqlite => sqlx::migrate!("migrations/sqlite").run(&pool).await,
-            Backend::Postgres => sqlx::migrate!("migrations/postgres").run(&pool).await,
-        };
-        migrated.map_err(|e| anyhow::anyhow!("cannot migrate the database {shown}: {e}"))?;
+        migrator(backend)
+            .run(&pool)
+            .await
+            .map_err(|e| anyhow::anyhow!("cannot migrate the database {shown}: {e}"))?;
         Ok(SqlStore { pool, backend })
     }
+}
+
+/// A migration's version, description and SQL.
+pub type EmbeddedMigration = (i64, &'static str, &'static str);
+
+/// Each backend's migrations, embedded in the binary: version, description and SQL
+/// of each file of `migrations/sqlite` and `migrations/postgres` (a test checks that
+/// the lists and the folders agree). Listed by hand rather than by sqlx's
+/// `migrate!`, whose macros would build sqlx's drivers, SQLite's C source among
+/// them, a second time for the compiler.
+pub const MIGRATIONS: [(Backend, &[EmbeddedMigration]); 2] = [
+    (
+        Backend::Sqlite,
+        &[(
+            1,
+            "jobs",
+            include_str!("../../migrations/sqlite/0001_jobs.sql"),
+        )],
+    ),
+    (
+        Backend::Postgres,
+        &[(
+            1,
+            "jobs",
+            include_str!("../../migrations/postgres/0001_jobs.sql"),
+        )],
+    ),
+];
+
+/// The migrator of `backend`'s schema. The checksums are the SQL's own, as
+/// `migrate!` made them, so databases made before keep their history.
+fn migrator(backend: Backend) -> Migrator {
+    let list = MIGRATIONS
+        .iter()
+        .find(|(b, _)| *b == backend)
+        .map_or(&[][..], |(_, list)| list);
+    Migrator::with_migrations(
+        list.iter()
+            .map(|&(version, description, sql)| {
+                Migration::new(
+                    version,
+                    description.into(),
+                    MigrationType::Simple,
+                    SqlStr::from_static(sql),
+                    sql.starts_with("-- no-transaction"),
+                )
+            })
+            .collect(),
+    )
 }
 
 /// A database URL without its password.
@@ -578,5 +628,41 @@ impl Store for SqlStore {
             sqlx::query("SELECT 1").execute(&self.pool).await?;
             Ok(())
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A migration file added to a folder but not to [`MIGRATIONS`] would never run.
+    #[test]
+    fn every_migration_file_is_embedded() {
+        for (backend, list) in MIGRATIONS {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join(match backend {
+                Backend::Sqlite => "migrations/sqlite",
+                Backend::Postgres => "migrations/postgres",
+            });
+            let mut files: Vec<String> = std::fs::read_dir(&dir)
+                .expect("the migrations folder")
+                .map(|e| {
+                    e.expect("an entry")
+                        .file_name()
+                        .to_string_lossy()
+                        .into_owned()
+                })
+                .collect();
+            files.sort();
+            let listed: Vec<String> = list
+                .iter()
+                .map(|(v, d, _)| format!("{v:04}_{}.sql", d.replace(' ', "_")))
+                .collect();
+            assert_eq!(files, listed, "{backend:?}");
+            for ((_, _, sql), file) in list.iter().zip(&files) {
+                let on_disk = std::fs::read_to_string(dir.join(file)).expect("a migration");
+                assert_eq!(*sql, on_disk, "{file}");
+            }
+            assert_eq!(migrator(backend).iter().count(), list.len());
+        }
     }
 }
