@@ -187,7 +187,7 @@ impl WeightArgs {
 struct RefitArgs {
     /// No second pass (on by default: each block of 150 frames tracked again
     /// backwards from its end, initialised afresh, a frame taking that answer where
-    /// it costs at least 30% less). About 1.5 times as fast, less accurate.
+    /// it costs less). About 1.5 times as fast, less accurate.
     #[arg(long)]
     one_way: bool,
     /// The smoothed refit: each frame searched again from the Gaussian average of
