@@ -76,14 +76,14 @@ impl SqlStore {
 }
 
 /// A migration's version, description and SQL.
-pub type EmbeddedMigration = (i64, &'static str, &'static str);
+type EmbeddedMigration = (i64, &'static str, &'static str);
 
 /// Each backend's migrations, embedded in the binary: version, description and SQL
 /// of each file of `migrations/sqlite` and `migrations/postgres` (a test checks that
 /// the lists and the folders agree). Listed by hand rather than by sqlx's
 /// `migrate!`, whose macros would build sqlx's drivers, SQLite's C source among
 /// them, a second time for the compiler.
-pub const MIGRATIONS: [(Backend, &[EmbeddedMigration]); 2] = [
+const MIGRATIONS: [(Backend, &[EmbeddedMigration]); 2] = [
     (
         Backend::Sqlite,
         &[(
