@@ -124,10 +124,10 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
     assert!(pck >= 0.8, "PCK {pck:.3}");
 }
 
-/// The second pass only ever replaces a frame by a clearly cheaper answer: the
+/// The second pass only ever replaces a frame by a cheaper answer: the
 /// first pass is the one-way track, frame for frame.
 #[test]
-fn the_second_pass_keeps_the_first_or_a_clearly_cheaper_answer() {
+fn the_second_pass_keeps_the_first_or_a_cheaper_answer() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let track = |two_way: bool| {

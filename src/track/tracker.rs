@@ -391,7 +391,7 @@ pub struct Progress {
     /// Frames per second since tracking began.
     pub fps: f64,
     /// This report revises a frame reported before: the second pass
-    /// ([`TrackOptions::two_way`]) found a clearly cheaper answer for it.
+    /// ([`TrackOptions::two_way`]) found a cheaper answer for it.
     /// `frames_done` counts each frame once, on its first report.
     pub revised: bool,
 }
