@@ -444,17 +444,25 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_runs": 20}), true);
     check(serde_json::json!({"refit_runs": 0}), false);
     check(serde_json::json!({"refit_runs": 21}), false);
-    check(serde_json::json!({"two_way": true}), true);
-    check(serde_json::json!({"two_way": "yes"}), false);
-    let off = JobOptions::from_query(&[("two_way".into(), "false".into())]).unwrap();
-    assert!(
-        !off.to_track().unwrap().track.two_way,
-        "two_way=false in a query"
-    );
-    assert!(
-        JobOptions::default().to_track().unwrap().track.two_way,
-        "on by default"
-    );
+    // The passes after the first: booleans, on by default, off from a query too.
+    type On = fn(&monocap::track::tracker::TrackOptions) -> bool;
+    let passes: [(&str, On); 2] = [
+        ("two_way", |t| t.two_way),
+        ("middle_pass", |t| t.middle_pass),
+    ];
+    for (name, on) in passes {
+        check(serde_json::json!({ name: true }), true);
+        check(serde_json::json!({ name: false }), true);
+        check(serde_json::json!({ name: "yes" }), false);
+        check(serde_json::json!({ name: 0 }), false);
+        let off = JobOptions::from_query(&[(name.into(), "false".into())]).unwrap();
+        assert!(
+            !on(&off.to_track().unwrap().track),
+            "{name}=false in a query"
+        );
+        let default = JobOptions::default().to_track().unwrap();
+        assert!(on(&default.track), "{name} on by default");
+    }
     check(serde_json::json!({"work_height": 32}), true);
     check(serde_json::json!({"work_height": 1080}), true);
     check(serde_json::json!({"work_height": 1081}), false);

@@ -124,15 +124,17 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
     assert!(pck >= 0.8, "PCK {pck:.3}");
 }
 
-/// The second pass only ever replaces a frame by a cheaper answer: the
-/// first pass is the one-way track, frame for frame.
+/// The later passes only ever replace a frame by a cheaper answer: the first pass
+/// is the one-way track, frame for frame, and the middle pass changes the two-way
+/// track only where it is cheaper still.
 #[test]
-fn the_second_pass_keeps_the_first_or_a_cheaper_answer() {
+fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
-    let track = |two_way: bool| {
+    let track = |two_way: bool, middle_pass: bool| {
         let o = TrackOptions {
             two_way,
+            middle_pass,
             ..TrackOptions::default()
         };
         Tracker::new(cam.clone(), o)
@@ -141,33 +143,40 @@ fn the_second_pass_keeps_the_first_or_a_cheaper_answer() {
             })
             .unwrap()
     };
-    let (one, two) = (track(false), track(true));
-    assert_eq!(one.shape, two.shape);
-    assert!(
-        two.timing.evals > one.timing.evals * 3 / 2,
-        "the second pass ran: {} evaluations against {}",
-        two.timing.evals,
-        one.timing.evals
-    );
-    let mut replaced = 0;
-    for (a, b) in one.frames.iter().zip(&two.frames) {
-        assert_eq!((a.index, a.person), (b.index, b.person));
-        if a != b {
-            let (ca, cb) = (a.cost.unwrap(), b.cost.unwrap());
-            assert!(
-                cb < ca - monocap::track::tracker::TWO_WAY_MARGIN * ca.abs(),
-                "frame {}: {cb} replaced {ca}",
-                a.index
-            );
-            replaced += 1;
+    let one = track(false, true);
+    let two = track(true, false);
+    let three = track(true, true);
+    for (before, after, pass) in [
+        (&one, &two, "the second pass"),
+        (&two, &three, "the middle pass"),
+    ] {
+        assert_eq!(before.shape, after.shape);
+        assert!(
+            after.timing.evals > before.timing.evals * 5 / 4,
+            "{pass} ran: {} evaluations against {}",
+            after.timing.evals,
+            before.timing.evals
+        );
+        let mut replaced = 0;
+        for (a, b) in before.frames.iter().zip(&after.frames) {
+            assert_eq!((a.index, a.person), (b.index, b.person));
+            if a != b {
+                let (ca, cb) = (a.cost.unwrap(), b.cost.unwrap());
+                assert!(
+                    cb < ca - monocap::track::tracker::TWO_WAY_MARGIN * ca.abs(),
+                    "{pass}, frame {}: {cb} replaced {ca}",
+                    a.index
+                );
+                replaced += 1;
+            }
         }
+        println!(
+            "{pass} replaced {replaced} of {} frames ({} evaluations against {})",
+            masks.len(),
+            after.timing.evals,
+            before.timing.evals
+        );
     }
-    println!(
-        "the second pass replaced {replaced} of {} frames ({} evaluations against {})",
-        masks.len(),
-        two.timing.evals,
-        one.timing.evals
-    );
 }
 
 #[test]
@@ -175,8 +184,10 @@ fn the_other_candidate_starts_turned_round() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let heading = |other_candidate: bool| {
+        // The first pass alone: a later pass may replace the initial frame's answer.
         let o = TrackOptions {
             other_candidate,
+            two_way: false,
             ..TrackOptions::default()
         };
         let track = Tracker::new(cam.clone(), o)
@@ -626,6 +637,9 @@ fn a_bow_towards_the_camera_is_tracked_mostly_in_the_trunk() {
 /// counts whole pixels, as when it was measured: counting shares of the outline's
 /// pixels (the default since 2026-11-29) the joint velocity no longer loses the
 /// walker (0.897, with the polish 0.912, with the root's velocity 0.933).
+/// These are the first pass's figures (`--one-way`): the later passes, started
+/// afresh, cover for it (with the second pass 0.849, 0.902 and 0.918; with the
+/// middle pass too 0.869, 0.918 and 0.920).
 #[test]
 fn the_joint_velocity_loses_a_walker_the_polish_or_the_root_velocity_keeps() {
     use monocap::track::bench::{run_clip, BenchOptions};
@@ -654,6 +668,8 @@ fn the_joint_velocity_loses_a_walker_the_polish_or_the_root_velocity_keeps() {
         // the one after a cost spike alone).
         opts.track.recover_iou = 0.0;
         opts.track.recover_spike = 0.0;
+        // The first pass alone: the later passes, started afresh, cover for it.
+        opts.track.two_way = false;
         run_clip(&bvh, "walk", -120.0, 10, &opts).unwrap().acc.iou()
     };
     let (without, with) = (iou(0, true), iou(1000, true));
