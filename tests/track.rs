@@ -146,13 +146,15 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     let one = track(false, true);
     let two = track(true, false);
     let three = track(true, true);
-    for (before, after, pass) in [
-        (&one, &two, "the second pass"),
-        (&two, &three, "the middle pass"),
+    // Each later pass searches every frame once more: the second doubles the
+    // first's work, the middle one adds half of the two passes'.
+    for (before, after, pass, more) in [
+        (&one, &two, "the second pass", (3, 2)),
+        (&two, &three, "the middle pass", (5, 4)),
     ] {
         assert_eq!(before.shape, after.shape);
         assert!(
-            after.timing.evals > before.timing.evals * 5 / 4,
+            after.timing.evals > before.timing.evals * more.0 / more.1,
             "{pass} ran: {} evaluations against {}",
             after.timing.evals,
             before.timing.evals
