@@ -187,15 +187,22 @@ impl WeightArgs {
 struct RefitArgs {
     /// No second pass (on by default: each block of 150 frames tracked again
     /// backwards from its end, initialised afresh, a frame taking that answer where
-    /// it costs less; and the middle pass). About twice as fast, less accurate.
+    /// the choice of `--switch-penalty` says; and the middle pass). About twice as
+    /// fast, less accurate.
     #[arg(long)]
     one_way: bool,
     /// No middle pass (on by default with the second pass: each block tracked a
     /// third time, initialised afresh on the middle one of its frames with a
-    /// person and searched from there both ways, a frame taking the cheapest
-    /// answer). About 1.35 times as fast, less accurate.
+    /// person and searched from there both ways). About 1.35 times as fast, less
+    /// accurate.
     #[arg(long)]
     no_middle_pass: bool,
+    /// How each frame chooses among the passes' answers: over each block, the
+    /// sequence with the least summed cost plus this many times the median
+    /// frame's cost for each length scale the pose moves from a frame to the next
+    /// (0 to 1000; 0 takes each frame's cheapest answer).
+    #[arg(long, default_value_t = monocap::track::tracker::SWITCH_PENALTY)]
+    switch_penalty: f64,
     /// The smoothed refit: each frame searched again from the Gaussian average of
     /// its neighbours' poses, this many frames wide (0 for none); on a helper
     /// thread behind the search when there are two threads or more.
@@ -211,6 +218,9 @@ impl RefitArgs {
     fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
         track.two_way = !self.one_way;
         track.middle_pass = !self.no_middle_pass;
+        monocap::track::tracker::check_switch_penalty(self.switch_penalty, "--switch-penalty")
+            .map_err(anyhow::Error::msg)?;
+        track.switch_penalty = self.switch_penalty;
         let (sigma, runs) = (self.refit_sigma, self.refit_runs);
         monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
             .map_err(anyhow::Error::msg)?;

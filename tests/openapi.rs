@@ -444,6 +444,18 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_runs": 20}), true);
     check(serde_json::json!({"refit_runs": 0}), false);
     check(serde_json::json!({"refit_runs": 21}), false);
+    check(serde_json::json!({"switch_penalty": 0.0}), true);
+    check(serde_json::json!({"switch_penalty": 1000.0}), true);
+    check(serde_json::json!({"switch_penalty": 1000.5}), false);
+    check(serde_json::json!({"switch_penalty": -0.01}), false);
+    assert!(doc.contains("name: switch_penalty"));
+    let query = JobOptions::from_query(&[("switch_penalty".into(), "0".into())]).unwrap();
+    assert_eq!(query.to_track().unwrap().track.switch_penalty, 0.0);
+    let default = JobOptions::default().to_track().unwrap().track;
+    assert_eq!(
+        default.switch_penalty,
+        monocap::track::tracker::SWITCH_PENALTY
+    );
     // The passes after the first: booleans, on by default, off from a query too.
     type On = fn(&monocap::track::tracker::TrackOptions) -> bool;
     let passes: [(&str, On); 2] = [

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
-use crate::track::tracker::{check_refit, MAX_POLISH_EVALS};
+use crate::track::tracker::{check_refit, check_switch_penalty, MAX_POLISH_EVALS};
 use crate::vision::background::EmptyFrames;
 
 /// Every field is optional; an unknown field is an error, not silently ignored.
@@ -39,6 +39,11 @@ pub struct JobOptions {
     /// fast.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub middle_pass: Option<bool>,
+    /// How each frame chooses among the passes' answers, 0 to 1000 (default 0.03;
+    /// see `TrackOptions::switch_penalty`): the price of moving from one pass's
+    /// track to another's; 0 takes each frame's cheapest answer.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub switch_penalty: Option<f64>,
     /// Keyframes as contracts.md: `{"keyframes": [{"frame": 42, ...}]}`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub keyframes: Option<serde_json::Value>,
@@ -160,6 +165,10 @@ impl JobOptions {
         }
         if let Some(t) = self.two_way {
             o.track.two_way = t;
+        }
+        if let Some(p) = self.switch_penalty {
+            check_switch_penalty(p, "switch_penalty")?;
+            o.track.switch_penalty = p;
         }
         let w = &mut o.track.weights;
         for (name, v, slot) in [

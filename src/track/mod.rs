@@ -3,6 +3,7 @@
 pub mod bench;
 pub mod flips;
 pub mod keyframes;
+pub mod merge;
 pub mod metrics;
 pub mod objective;
 pub mod outlines;

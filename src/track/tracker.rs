@@ -16,7 +16,8 @@
 //!   and of the block whose second pass (and middle pass,
 //!   [`TrackOptions::middle_pass`]) is running: two blocks at most, each under
 //!   [`TWO_WAY_BUDGET`] bytes (shorter blocks for large frames); and the first
-//!   pass's answers until their block's later passes are done.
+//!   pass's answers, and the later passes', until their block is merged
+//!   ([`super::merge`]).
 //!
 //! Per frame: the search starts at the previous solution moved by the parameter
 //! velocity (when that is not worse than the previous solution itself; and moved
@@ -95,16 +96,8 @@ pub fn two_way_block(width: u32, height: u32) -> usize {
     (TWO_WAY_BUDGET / bytes).clamp(MIN_TWO_WAY_BLOCK, TWO_WAY_BLOCK)
 }
 
-/// A frame takes the second pass's answer where it costs less than the first
-/// pass's by more than this fraction ([`TrackOptions::two_way`]): none, so the
-/// cheaper of the two. It was 30% while whole pixels were counted, which kept
-/// plain PCK@0.1 higher then. Counting shares of pixels ([`Weights::smooth`]), the
-/// cheaper answer did better over the accuracy benchmark's six runs (seeds 1–3,
-/// with and without a person-free lead-in): model IoU higher on all six (mean
-/// 0.904 → 0.908), lost frames 60 → 45, PA-MPJPE with the ambiguities allowed
-/// 98.6 → 97.3 mm, PA-MPJPE 115.5 → 115.0 mm, PCK@0.1 0.851 → 0.853 (README, "The
-/// second pass's margin, again").
-pub const TWO_WAY_MARGIN: f64 = 0.0;
+/// The default of [`TrackOptions::switch_penalty`].
+pub const SWITCH_PENALTY: f64 = 0.03;
 
 /// The default of [`TrackOptions::recover_iou`].
 const RECOVER_IOU: f64 = 0.75;
@@ -162,6 +155,19 @@ pub fn check_refit(sigma: f64, runs: usize, names: (&str, &str)) -> Result<(), S
         return Err(format!(
             "{} {runs}: expected 1 to {MAX_REFIT_RUNS}",
             names.1
+        ));
+    }
+    Ok(())
+}
+
+/// The largest [`TrackOptions::switch_penalty`] taken.
+pub const MAX_SWITCH_PENALTY: f64 = 1000.0;
+
+/// Checks a [`TrackOptions::switch_penalty`], named `name` in the message.
+pub fn check_switch_penalty(penalty: f64, name: &str) -> Result<(), String> {
+    if !(0.0..=MAX_SWITCH_PENALTY).contains(&penalty) {
+        return Err(format!(
+            "{name} {penalty}: expected 0 to {MAX_SWITCH_PENALTY}"
         ));
     }
     Ok(())
@@ -291,8 +297,8 @@ pub struct TrackOptions {
     /// (fewer for frames of more than 167,772 pixels, [`two_way_block`]) is
     /// tracked a second time, initialised afresh (with the clip's shape) on its
     /// last frame with a person and searched backwards, and a frame takes the
-    /// second pass's answer where it costs less than the first's
-    /// ([`TWO_WAY_MARGIN`]). A track that lost the person, or started from a wrong
+    /// second pass's answer where that is the cheaper
+    /// ([`TrackOptions::switch_penalty`]). A track that lost the person, or started from a wrong
     /// pose, is seldom lost in the same way when followed from the other end. Over the
     /// accuracy benchmark's three noise seeds, with a person-free lead-in and
     /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
@@ -308,12 +314,25 @@ pub struct TrackOptions {
     /// block is tracked a third time, initialised afresh (with the clip's shape) on
     /// the middle one of its frames with a person and searched from there
     /// backwards to the block's first frame and forwards to its last, beside the
-    /// second pass; a frame takes the cheapest of the three answers. Each start
+    /// second pass; a frame takes one of the three answers
+    /// ([`TrackOptions::switch_penalty`]). Each start
     /// goes wrong in its own places. Over the accuracy benchmark's six runs (seeds
     /// 1–3, with a person-free lead-in and without) PCK@0.1, PA-MPJPE and the
     /// model IoU were better on all six (means 0.853 → 0.866, 115.0 → 111.8 mm,
     /// 0.908 → 0.912), lost frames 45 → 40 in all (README, "The middle pass").
     pub middle_pass: bool,
+    /// How each frame chooses among the passes' answers ([`super::merge::choose`]):
+    /// over each block, the sequence with the least summed cost plus this many
+    /// times the median frame's cost for each length scale a pose moves from one
+    /// frame to the next (0: each frame's cheapest answer). A wrong pose cheaper on
+    /// a frame or two then no longer breaks into a track that is right on either
+    /// side of it. Over the accuracy benchmark's six runs (seeds 1–3, with a
+    /// person-free lead-in and without), 0.03 against 0: PCK@0.1 higher on all six
+    /// (means 0.866 → 0.876), PA-MPJPE with the ambiguities allowed lower on all
+    /// six (95.6 → 94.2 mm), PA-MPJPE 111.8 → 110.1 mm, lost frames 40 → 25 in all,
+    /// the model IoU 0.002–0.003 lower (README, "The choice among the passes'
+    /// answers"). The choice evaluates nothing.
+    pub switch_penalty: f64,
     /// The initial frame (None: chosen automatically).
     pub init_frame: Option<usize>,
     /// Frames with a person looked at when choosing the initial frame.
@@ -359,6 +378,7 @@ impl Default for TrackOptions {
             refit_runs: REFIT_RUNS,
             two_way: true,
             middle_pass: true,
+            switch_penalty: SWITCH_PENALTY,
             init_frame: None,
             init_window: 60,
             fps: 30.0,
@@ -725,6 +745,7 @@ impl Tracker {
             let mut two_way = TwoWay::new(
                 if self.opts.two_way { block } else { 0 },
                 self.opts.initial.is_some().then_some(init),
+                self.opts.switch_penalty,
             );
             let mut take =
                 |refit: &mut Refit, two_way: &mut TwoWay, end: bool| -> Result<(), TrackError> {
@@ -883,9 +904,10 @@ impl Tracker {
     /// The passes after the first over one block of frames
     /// ([`TrackOptions::two_way`]; the targets of frames `from`, `from` + 1, …): the
     /// backwards pass, and the middle pass ([`TrackOptions::middle_pass`]) side by
-    /// side with it when there are two threads or more; each frame the cheaper of
-    /// their answers. Its frames up to the block's last one with a person (none
-    /// when the block has no person), and the evaluations spent.
+    /// side with it when there are two threads or more. Their answers for the
+    /// block's frames up to its last one with a person (none when the block has no
+    /// person), in frame order and, for each frame, in the passes' order; and the
+    /// evaluations spent.
     fn block_passes(
         &self,
         body: &Body,
@@ -902,17 +924,16 @@ impl Tracker {
         let passes = par_map(starts, self.threads(), |&start| {
             self.block_pass(body, shape, from, targets.clone(), abort, start)
         });
-        let mut kept: Option<Vec<TrackedFrame>> = None;
+        let mut answers = Vec::new();
         let mut spent = 0;
         for pass in passes {
             let (frames, evals) = pass?;
             spent += evals;
-            match &mut kept {
-                None => kept = Some(frames),
-                Some(kept) => take_cheaper(kept, frames),
-            }
+            answers.extend(frames);
         }
-        Ok((kept.unwrap_or_default(), spent))
+        // A stable sort: each frame's answers stay in the passes' order.
+        answers.sort_by_key(|f| f.index);
+        Ok((answers, spent))
     }
 
     /// One pass over a block of frames after the first pass (the targets of frames
@@ -1393,19 +1414,20 @@ type Next = Option<Result<(usize, Option<Target>, f64), TrackError>>;
 /// input's failure in its place).
 type Queue = VecDeque<Result<(usize, Option<Arc<Target>>), TrackError>>;
 
-/// A block's later passes ([`Tracker::block_passes`]): its frames, each the
-/// cheaper of the second and middle passes' answers, and the evaluations spent.
+/// A block's later passes ([`Tracker::block_passes`]): the second and middle
+/// passes' answers for its frames, in frame order, and the evaluations spent.
 type BlockResult = Result<(Vec<TrackedFrame>, u64), TrackError>;
 
 /// The second pass's bookkeeping ([`TrackOptions::two_way`]): each target of the
 /// block being gathered (shared with the first pass, which reads a whole block
 /// before it searches its frames), the block whose second pass is running, and
 /// the first pass's frames (reported as they come), held until their block's
-/// second pass is done; then each frame takes the cheaper answer, and is reported
-/// again when that is the second pass's. The second pass here stands for the
-/// block's later passes: the backwards one and, beside it, the middle one
-/// ([`TrackOptions::middle_pass`]), whose answers are merged first
-/// ([`Tracker::block_passes`]).
+/// second pass is done and the first pass has handed over the whole block; then
+/// each frame takes the answer [`super::merge::choose`] picks among the passes'
+/// ([`TrackOptions::switch_penalty`]), and is reported again when that is not the
+/// first pass's. The second pass here stands for the block's later passes: the
+/// backwards one and, beside it, the middle one ([`TrackOptions::middle_pass`],
+/// [`Tracker::block_passes`]).
 ///
 /// With more than one thread, a block's second pass runs on a helper thread while
 /// the first pass searches the same frames; at most one block at a time, so the
@@ -1422,15 +1444,18 @@ struct TwoWay<'scope> {
     running: Option<(usize, ScopedJoinHandle<'scope, BlockResult>)>,
     /// Set when the track ends early: the helper then gives up.
     abort: Arc<AtomicBool>,
-    /// The second pass's frames not yet merged, in order.
+    /// The later passes' answers not yet merged, in frame order.
     back: VecDeque<TrackedFrame>,
     /// The first pass's frames (refitted) waiting for their block's second pass,
     /// each with whether it has been reported.
     held: VecDeque<(TrackedFrame, bool)>,
-    /// Frames before this one have their second pass (every frame when off).
-    ready_to: usize,
+    /// The ends of the blocks whose second pass is done and whose frames are not
+    /// yet merged, in order.
+    ends: VecDeque<usize>,
     /// A frame whose first answer stands (the given initial pose).
     keep_first: Option<usize>,
+    /// [`TrackOptions::switch_penalty`].
+    penalty: f64,
     evals: u64,
     /// Seconds the first pass's thread spent on the second pass (running it, or
     /// waiting for its helper).
@@ -1439,8 +1464,7 @@ struct TwoWay<'scope> {
 
 impl<'scope> TwoWay<'scope> {
     /// Blocks of `block` frames; 0 for no second pass.
-    fn new(block: usize, keep_first: Option<usize>) -> TwoWay<'scope> {
-        let on = block > 0;
+    fn new(block: usize, keep_first: Option<usize>, penalty: f64) -> TwoWay<'scope> {
         TwoWay {
             block,
             from: 0,
@@ -1449,8 +1473,9 @@ impl<'scope> TwoWay<'scope> {
             abort: Arc::new(AtomicBool::new(false)),
             back: VecDeque::new(),
             held: VecDeque::new(),
-            ready_to: if on { 0 } else { usize::MAX },
+            ends: VecDeque::new(),
             keep_first,
+            penalty,
             evals: 0,
             secs: 0.0,
         }
@@ -1590,53 +1615,80 @@ impl<'scope> TwoWay<'scope> {
         Ok(())
     }
 
-    /// A block's second pass is done: its frames, every frame before `end` ready.
+    /// A block's second pass is done: the later passes' answers for its frames,
+    /// which end before `end`.
     fn accept(&mut self, end: usize, frames: Vec<TrackedFrame>) {
         self.back.extend(frames);
-        self.ready_to = end;
+        self.ends.push_back(end);
     }
 
-    /// The last block's second pass (started when the input ended) is done; every
-    /// frame is ready.
+    /// The last block's second pass (started when the input ended) is done.
     fn finish(&mut self, pass: &Pass<'scope, '_>) -> Result<(), TrackError> {
         self.end_input(pass)?;
-        self.wait()?;
-        self.ready_to = usize::MAX;
-        Ok(())
+        self.wait()
     }
 
     /// No more second passes after the one running: the frames held after its block
-    /// go out as the first pass left them.
+    /// have gone out as the first pass left them, and are not merged.
     fn abandon(&mut self) -> Result<(), TrackError> {
         self.kept.clear();
-        self.wait()?;
-        self.ready_to = usize::MAX;
-        Ok(())
+        self.wait()
     }
 
     /// Takes the first pass's next frames (in order) and says what to report: each
-    /// frame once, at once (false), with the answer it keeps when its block's second
-    /// pass is done, and otherwise as the first pass left it; and, once that second
-    /// pass is done, again (true) each such frame whose answer it replaces.
+    /// frame once, at once (false), with the answer it keeps when its block is
+    /// merged by then, and otherwise as the first pass left it; and, once its
+    /// block is merged (its second pass done and all its frames handed over),
+    /// again (true) each such frame whose answer the merge replaces.
     fn merge(&mut self, frames: Vec<TrackedFrame>) -> Vec<(TrackedFrame, bool)> {
+        if self.block == 0 {
+            return frames.into_iter().map(|f| (f, false)).collect();
+        }
         self.held.extend(frames.into_iter().map(|f| (f, false)));
         let mut out = Vec::new();
-        while self
-            .held
-            .front()
-            .is_some_and(|(f, _)| f.index < self.ready_to)
-        {
-            let (first, reported) = self.held.pop_front().expect("a frame held");
-            while self.back.front().is_some_and(|b| b.index < first.index) {
-                self.back.pop_front();
+        while let Some(&end) = self.ends.front() {
+            // The block's frames are all here once the first pass has handed over
+            // its last one.
+            if self.held.back().is_none_or(|(f, _)| f.index + 1 < end) {
+                break;
             }
-            let second = self.back.front().filter(|b| b.index == first.index);
-            let better =
-                Some(first.index) != self.keep_first && second.is_some_and(|b| cheaper(b, &first));
-            match second {
-                Some(b) if better => out.push((b.clone(), reported)),
-                _ if !reported => out.push((first, false)),
-                _ => {}
+            self.ends.pop_front();
+            let n = self.held.iter().take_while(|(f, _)| f.index < end).count();
+            let block: Vec<(TrackedFrame, bool)> = self.held.drain(..n).collect();
+            let mut answers: Vec<Vec<TrackedFrame>> = Vec::with_capacity(n);
+            for (first, _) in &block {
+                while self.back.front().is_some_and(|b| b.index < first.index) {
+                    self.back.pop_front();
+                }
+                let mut these = vec![first.clone()];
+                while let Some(b) = self.back.pop_front_if(|b| b.index == first.index) {
+                    if Some(first.index) != self.keep_first {
+                        these.push(b);
+                    }
+                }
+                answers.push(these);
+            }
+            // A given initial pose is held on its frame whatever it costs: it is no
+            // choice, and the choice on either side of it is made without it (a
+            // wrong one would otherwise hold its neighbours to its branch).
+            let mut chosen = vec![0; n];
+            let pinned = block
+                .iter()
+                .position(|(f, _)| Some(f.index) == self.keep_first);
+            let parts = match pinned {
+                Some(k) => [0..k, k + 1..n],
+                None => [0..n, n..n],
+            };
+            for part in parts {
+                let c = super::merge::choose(&answers[part.clone()], self.penalty);
+                chosen[part].copy_from_slice(&c);
+            }
+            for (((first, reported), mut these), c) in block.into_iter().zip(answers).zip(chosen) {
+                if c > 0 {
+                    out.push((these.swap_remove(c), reported));
+                } else if !reported {
+                    out.push((first, false));
+                }
             }
         }
         for (f, reported) in self.held.iter_mut().filter(|(_, r)| !*r) {
@@ -1662,26 +1714,6 @@ enum BlockStart {
     Last,
     /// The middle one of its frames with a person ([`TrackOptions::middle_pass`]).
     Middle,
-}
-
-/// Whether answer `b` for a frame replaces answer `a`: it shows a person and costs
-/// less, by more than [`TWO_WAY_MARGIN`].
-fn cheaper(b: &TrackedFrame, a: &TrackedFrame) -> bool {
-    match (a.cost, b.cost) {
-        (Some(a), Some(c)) => b.person && c < a - TWO_WAY_MARGIN * a.abs(),
-        _ => false,
-    }
-}
-
-/// Each frame of `kept` takes the answer of `other` (the same frames, in order)
-/// where that is the cheaper ([`cheaper`]).
-fn take_cheaper(kept: &mut [TrackedFrame], other: Vec<TrackedFrame>) {
-    for (k, f) in kept.iter_mut().zip(other) {
-        debug_assert_eq!(k.index, f.index);
-        if cheaper(&f, k) {
-            *k = f;
-        }
-    }
 }
 
 /// Whether a frame's cost is a spike: over `k` times the median of the earlier
@@ -2515,7 +2547,7 @@ mod tests {
 
     #[test]
     fn the_second_pass_gathers_whole_blocks() {
-        let mut two = TwoWay::new(TWO_WAY_BLOCK, None);
+        let mut two = TwoWay::new(TWO_WAY_BLOCK, None, SWITCH_PENALTY);
         for i in 0..TWO_WAY_BLOCK - 1 {
             assert!(two.keep(None).is_none(), "frame {i}");
         }
@@ -2525,7 +2557,7 @@ mod tests {
         let (from, block) = (two.from, std::mem::take(&mut two.kept));
         assert_eq!((from, block.len()), (TWO_WAY_BLOCK, 1));
         // Off: nothing is kept, and every frame passes straight through.
-        let mut off = TwoWay::new(0, None);
+        let mut off = TwoWay::new(0, None, SWITCH_PENALTY);
         assert!((0..2 * TWO_WAY_BLOCK).all(|_| off.keep(None).is_none()));
         assert!(off.kept.is_empty());
         assert_eq!(
@@ -2535,8 +2567,14 @@ mod tests {
     }
 
     #[test]
-    fn a_frame_takes_the_second_answer_only_when_cheaper() {
-        let mut two = TwoWay::new(TWO_WAY_BLOCK, Some(4));
+    fn a_block_is_merged_once_its_passes_and_its_frames_are_all_in() {
+        let no_person = |i| TrackedFrame {
+            person: false,
+            cost: None,
+            ..answer(i, 0.0)
+        };
+        // Without a switch penalty: each frame's cheapest answer.
+        let mut two = TwoWay::new(TWO_WAY_BLOCK, Some(4), 0.0);
         // Reported at once, as the first pass left them, and held.
         let first: Vec<_> = (0..6).map(|i| (answer(i, 100.0), false)).collect();
         assert_eq!(
@@ -2544,70 +2582,73 @@ mod tests {
             first
         );
         assert!(two.merge(Vec::new()).is_empty(), "each reported once");
-        let cheaper = 100.0 * (1.0 - TWO_WAY_MARGIN);
-        let second = vec![
-            answer(0, cheaper - 1.0),
-            answer(1, cheaper + 1.0),
-            TrackedFrame {
-                person: false,
-                cost: None,
-                ..answer(2, 0.0)
-            },
-            // 3: no second answer (after the block's last person).
+        // The later passes' answers, in frame order (two for frame 1).
+        let later = vec![
+            answer(0, 99.0),
+            answer(1, 101.0),
+            answer(1, 98.0),
+            no_person(2),
+            // 3: none (after the block's last person).
+            // 4: the given initial pose's frame keeps its first answer.
             answer(4, 1.0),
         ];
-        two.accept(5, second);
-        // Reported again: only the frames the second pass replaces.
-        let out = two.merge(Vec::new());
-        assert_eq!(out, vec![(answer(0, cheaper - 1.0), true)]);
-        assert_eq!(out[0].0.pose, answer(0, 0.0).pose);
-        // Frame 5 waits for the next block; a first pass's negative cost too.
+        two.accept(5, later);
+        // Reported again: only the frames whose answer is replaced.
+        assert_eq!(
+            two.merge(Vec::new()),
+            vec![(answer(0, 99.0), true), (answer(1, 98.0), true)]
+        );
+        // Frame 5's block (5 and 6) is done, but the first pass has not handed
+        // over frame 6: it waits, negative costs and all.
         assert_eq!(two.held.len(), 1);
-        two.accept(usize::MAX, vec![answer(5, -200.0), answer(6, -131.0)]);
-        assert_eq!(two.merge(Vec::new()), vec![(answer(5, -200.0), true)]);
-        // A frame whose second pass is done before the first pass hands it over
-        // is reported once, with the answer it keeps.
+        two.accept(7, vec![answer(5, -200.0), answer(6, -131.0)]);
+        assert!(two.merge(Vec::new()).is_empty());
+        // Then frame 5 comes again, and frame 6 once, with the answer it keeps.
         assert_eq!(
             two.merge(vec![answer(6, -100.0)]),
-            vec![(answer(6, -131.0), false)]
+            vec![(answer(5, -200.0), true), (answer(6, -131.0), false)]
         );
+        assert!(two.held.is_empty() && two.back.is_empty());
     }
 
     #[test]
-    fn a_block_takes_the_cheaper_of_two_passes_answers() {
-        let no_person = |i| TrackedFrame {
-            person: false,
-            cost: None,
-            ..answer(i, 0.0)
+    fn with_a_switch_penalty_a_lone_cheaper_answer_is_not_taken() {
+        // Another track (every value 50 away) 1% cheaper on one frame of three.
+        let other = |i| TrackedFrame {
+            pose: [50.0; MOTION_COUNT],
+            ..answer(i, 99.0)
         };
-        let mut kept = vec![
-            answer(0, 50.0),
-            answer(1, 50.0),
-            no_person(2),
-            answer(3, -5.0),
-        ];
-        let other = vec![
-            answer(0, 49.0),
-            answer(1, 50.0),
-            no_person(2),
-            answer(3, -10.0),
-        ];
-        take_cheaper(&mut kept, other);
-        let cheaper = 50.0 * (1.0 - TWO_WAY_MARGIN);
-        assert_eq!(kept[0].cost, Some(if 49.0 < cheaper { 49.0 } else { 50.0 }));
-        assert_eq!(kept[1].cost, Some(50.0), "a tie keeps the first answer");
-        assert_eq!(kept[2], no_person(2));
-        assert_eq!(kept[3].cost, Some(-10.0), "negative costs compare too");
-        // An answer without a person never replaces one.
-        let mut kept = vec![answer(0, 50.0)];
-        take_cheaper(
-            &mut kept,
-            vec![TrackedFrame {
-                cost: Some(1.0),
-                ..no_person(0)
-            }],
+        for (penalty, taken) in [(0.0, true), (SWITCH_PENALTY, false)] {
+            let mut two = TwoWay::new(TWO_WAY_BLOCK, None, penalty);
+            let first: Vec<_> = (0..3).map(|i| answer(i, 100.0)).collect();
+            assert_eq!(two.merge(first).len(), 3);
+            two.accept(3, vec![other(1)]);
+            let out = two.merge(Vec::new());
+            assert_eq!(out == vec![(other(1), true)], taken, "penalty {penalty}");
+            assert_eq!(out.is_empty(), !taken, "penalty {penalty}");
+        }
+    }
+
+    #[test]
+    fn a_given_initial_pose_does_not_hold_its_neighbours() {
+        // Frame 0's given pose is far from both tracks; the other track (every
+        // value 50 away from the first's) is cheaper on frames 1 and 2.
+        let mut two = TwoWay::new(TWO_WAY_BLOCK, Some(0), SWITCH_PENALTY);
+        let given = TrackedFrame {
+            pose: [-50.0; MOTION_COUNT],
+            ..answer(0, 100.0)
+        };
+        let other = |i| TrackedFrame {
+            pose: [50.0; MOTION_COUNT],
+            ..answer(i, 90.0)
+        };
+        let first = vec![given.clone(), answer(1, 100.0), answer(2, 100.0)];
+        assert_eq!(two.merge(first).len(), 3);
+        two.accept(3, vec![other(0), other(1), other(2)]);
+        assert_eq!(
+            two.merge(Vec::new()),
+            vec![(other(1), true), (other(2), true)]
         );
-        assert_eq!(kept, vec![answer(0, 50.0)]);
     }
 
     #[test]
