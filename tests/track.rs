@@ -479,6 +479,11 @@ fn bad_input_gives_one_clear_line() {
         &monocap(&["track", s(&clip), "-o", s(&out), "--refit-runs", "0"]),
         "--refit-runs 0",
     );
+    assert_fails_with(
+        "switch penalty",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--switch-penalty", "1001"]),
+        "--switch-penalty 1001",
+    );
     assert!(!out.exists(), "nothing written on failure");
 }
 

@@ -297,9 +297,10 @@ pub struct TrackOptions {
     /// (fewer for frames of more than 167,772 pixels, [`two_way_block`]) is
     /// tracked a second time, initialised afresh (with the clip's shape) on its
     /// last frame with a person and searched backwards, and a frame takes the
-    /// second pass's answer where that is the cheaper
-    /// ([`TrackOptions::switch_penalty`]). A track that lost the person, or started from a wrong
-    /// pose, is seldom lost in the same way when followed from the other end. Over the
+    /// second pass's answer where the choice among the passes' answers does
+    /// ([`TrackOptions::switch_penalty`]). A track that lost the person, or started
+    /// from a wrong pose, is seldom lost in the same way when followed from the
+    /// other end. Over the
     /// accuracy benchmark's three noise seeds, with a person-free lead-in and
     /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
     /// PA-MPJPE, model IoU and lost frames (README, "The second pass"). With more
