@@ -642,9 +642,8 @@ fn track_bend(
 /// branch: spine_x −1°, 15°, 25°, 31°, 34° on frames 1–5 (the truth 31°–35°).
 ///
 /// The first pass alone: the second pass, started afresh on the last frame, finds
-/// an upright trunk (spine_x 0°–1°) that costs
-/// less on frames 1–3 (351–393 against 509–677) and a little more on frames 4 and 5
-/// (416 and 405 against 377 and 353). Each frame's cheapest answer ended on the
+/// an upright trunk (spine_x 0°–1°) that costs less on frames 1–3 (351–393 against
+/// 509–677) and a little more on frames 4 and 5 (416 and 405 against 377 and 353). Each frame's cheapest answer ended on the
 /// right branch for the last two frames only; the choice with a switch penalty
 /// (the default since 2026-11-29) keeps the upright track throughout, as moving
 /// between the two tracks costs more than those two frames save.

@@ -72,6 +72,12 @@ pub fn choose(answers: &[Vec<TrackedFrame>], penalty: f64) -> Vec<usize> {
     chosen
 }
 
+/// The least of `(total, answer)` pairs by total, the earliest among equals;
+/// (∞, 0) for none.
+fn least(pairs: impl Iterator<Item = (f64, usize)>) -> (f64, usize) {
+    pairs.fold((f64::INFINITY, 0), |m, x| if x.0 < m.0 { x } else { m })
+}
+
 /// [`choose`] over a run of frames, each with a usable answer.
 fn choose_run(run: &[Vec<TrackedFrame>], per_unit: f64, chosen: &mut [usize]) {
     // For each frame and answer: the least total up to it, and the answer before it
@@ -87,25 +93,17 @@ fn choose_run(run: &[Vec<TrackedFrame>], per_unit: f64, chosen: &mut [usize]) {
                 if t == 0 {
                     return (cost, 0);
                 }
-                let (total, from) = run[t - 1]
-                    .iter()
-                    .enumerate()
-                    .map(|(a, p)| (best[t - 1][a].0 + per_unit * distance(&p.pose, &f.pose), a))
-                    .fold((f64::INFINITY, 0), |m, x| if x.0 < m.0 { x } else { m });
+                let (total, from) =
+                    least(run[t - 1].iter().enumerate().map(|(a, p)| {
+                        (best[t - 1][a].0 + per_unit * distance(&p.pose, &f.pose), a)
+                    }));
                 (total + cost, from)
             })
             .collect();
         best.push(row);
     }
     let last = best.len() - 1;
-    let mut at = best[last]
-        .iter()
-        .enumerate()
-        .fold(
-            (f64::INFINITY, 0),
-            |m, (a, x)| if x.0 < m.0 { (x.0, a) } else { m },
-        )
-        .1;
+    let mut at = least(best[last].iter().enumerate().map(|(a, x)| (x.0, a))).1;
     for t in (0..=last).rev() {
         chosen[t] = at;
         at = best[t][at].1;

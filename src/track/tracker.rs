@@ -1655,27 +1655,31 @@ impl<'scope> TwoWay<'scope> {
             }
             self.ends.pop_front();
             let n = self.held.iter().take_while(|(f, _)| f.index < end).count();
-            let block: Vec<(TrackedFrame, bool)> = self.held.drain(..n).collect();
+            // Each frame's answers, the first pass's first, and whether it has been
+            // reported.
             let mut answers: Vec<Vec<TrackedFrame>> = Vec::with_capacity(n);
-            for (first, _) in &block {
+            let mut reported: Vec<bool> = Vec::with_capacity(n);
+            for (first, r) in self.held.drain(..n) {
                 while self.back.front().is_some_and(|b| b.index < first.index) {
                     self.back.pop_front();
                 }
-                let mut these = vec![first.clone()];
-                while let Some(b) = self.back.pop_front_if(|b| b.index == first.index) {
-                    if Some(first.index) != self.keep_first {
+                let index = first.index;
+                let mut these = vec![first];
+                while let Some(b) = self.back.pop_front_if(|b| b.index == index) {
+                    if Some(index) != self.keep_first {
                         these.push(b);
                     }
                 }
                 answers.push(these);
+                reported.push(r);
             }
             // A given initial pose is held on its frame whatever it costs: it is no
             // choice, and the choice on either side of it is made without it (a
             // wrong one would otherwise hold its neighbours to its branch).
             let mut chosen = vec![0; n];
-            let pinned = block
+            let pinned = answers
                 .iter()
-                .position(|(f, _)| Some(f.index) == self.keep_first);
+                .position(|a| Some(a[0].index) == self.keep_first);
             let parts = match pinned {
                 Some(k) => [0..k, k + 1..n],
                 None => [0..n, n..n],
@@ -1684,11 +1688,10 @@ impl<'scope> TwoWay<'scope> {
                 let c = super::merge::choose(&answers[part.clone()], self.penalty);
                 chosen[part].copy_from_slice(&c);
             }
-            for (((first, reported), mut these), c) in block.into_iter().zip(answers).zip(chosen) {
-                if c > 0 {
+            // Reported again where the answer changes; once where not yet reported.
+            for ((mut these, reported), c) in answers.into_iter().zip(reported).zip(chosen) {
+                if c > 0 || !reported {
                     out.push((these.swap_remove(c), reported));
-                } else if !reported {
-                    out.push((first, false));
                 }
             }
         }
