@@ -294,33 +294,31 @@ pub struct TrackOptions {
     /// the figures.
     pub recover_spike: f64,
     /// The second pass (on by default): each block of [`TWO_WAY_BLOCK`] frames
-    /// (fewer for frames of more than 167,772 pixels, [`two_way_block`]) is
-    /// tracked a second time, initialised afresh (with the clip's shape) on its
-    /// last frame with a person and searched backwards, and a frame takes the
-    /// second pass's answer where the choice among the passes' answers does
+    /// (fewer for frames of more than 167,772 pixels, [`two_way_block`]) is tracked
+    /// a second time, initialised afresh (with the clip's shape) on its last frame
+    /// with a person and searched backwards, and a frame takes the second pass's
+    /// answer where the choice among the passes' answers does
     /// ([`TrackOptions::switch_penalty`]). A track that lost the person, or started
     /// from a wrong pose, is seldom lost in the same way when followed from the
-    /// other end. Over the
-    /// accuracy benchmark's three noise seeds, with a person-free lead-in and
-    /// without, every one of the six runs gained in PCK@0.1, PCK with swaps,
-    /// PA-MPJPE, model IoU and lost frames (README, "The second pass"). With more
-    /// than one thread it runs beside the first pass: a median 12.1 and 10.9
-    /// frames/s with a lead-in and without, against 17.9 and 17.2 for the first
-    /// pass alone, on the same machine. Frames are reported as the first pass
-    /// leaves them, and a frame whose answer the second pass replaces is reported
-    /// again once its block is done ([`Progress::revised`]); a block's targets are
-    /// held until then.
+    /// other end. Over the accuracy benchmark's three noise seeds, with a
+    /// person-free lead-in and without, every one of the six runs gained in PCK@0.1,
+    /// PCK with swaps, PA-MPJPE, model IoU and lost frames (README, "The second
+    /// pass"). With more than one thread it runs beside the first pass: a median
+    /// 12.1 and 10.9 frames/s with a lead-in and without, against 17.9 and 17.2 for
+    /// the first pass alone, on the same machine. Frames are reported as the first
+    /// pass leaves them, and a frame whose answer the second pass replaces is
+    /// reported again once its block is done ([`Progress::revised`]); a block's
+    /// targets are held until then.
     pub two_way: bool,
     /// The middle pass (on by default; only with [`TrackOptions::two_way`]): each
     /// block is tracked a third time, initialised afresh (with the clip's shape) on
-    /// the middle one of its frames with a person and searched from there
-    /// backwards to the block's first frame and forwards to its last, beside the
-    /// second pass; a frame takes one of the three answers
-    /// ([`TrackOptions::switch_penalty`]). Each start
-    /// goes wrong in its own places. Over the accuracy benchmark's six runs (seeds
-    /// 1–3, with a person-free lead-in and without) PCK@0.1, PA-MPJPE and the
-    /// model IoU were better on all six (means 0.853 → 0.866, 115.0 → 111.8 mm,
-    /// 0.908 → 0.912), lost frames 45 → 40 in all (README, "The middle pass").
+    /// the middle one of its frames with a person and searched from there backwards
+    /// to the block's first frame and forwards to its last, beside the second pass;
+    /// a frame takes one of the three answers ([`TrackOptions::switch_penalty`]).
+    /// Each start goes wrong in its own places. Over the accuracy benchmark's six
+    /// runs (seeds 1–3, with a person-free lead-in and without) PCK@0.1, PA-MPJPE
+    /// and the model IoU were better on all six (means 0.853 → 0.866, 115.0 → 111.8
+    /// mm, 0.908 → 0.912), lost frames 45 → 40 in all (README, "The middle pass").
     pub middle_pass: bool,
     /// How each frame chooses among the passes' answers ([`super::merge::choose`]):
     /// over each block, the sequence with the least summed cost plus this many
@@ -1666,16 +1664,15 @@ impl<'scope> TwoWay<'scope> {
                 let index = first.index;
                 let mut these = vec![first];
                 while let Some(b) = self.back.pop_front_if(|b| b.index == index) {
-                    if Some(index) != self.keep_first {
-                        these.push(b);
-                    }
+                    these.push(b);
                 }
                 answers.push(these);
                 reported.push(r);
             }
-            // A given initial pose is held on its frame whatever it costs: it is no
-            // choice, and the choice on either side of it is made without it (a
-            // wrong one would otherwise hold its neighbours to its branch).
+            // A given initial pose is held on its frame whatever it costs: its frame
+            // is in neither part, so it keeps its first answer, and the choice on
+            // either side of it is made without it (a wrong one would otherwise hold
+            // its neighbours to its branch).
             let mut chosen = vec![0; n];
             let pinned = answers
                 .iter()
