@@ -319,15 +319,24 @@ impl Jump {
 /// root square to the line of sight from the camera (at the world's origin), left
 /// and right exchanged so that it is a body again. Seen by an orthographic camera
 /// it is the same silhouette; a pinhole camera sees it nearly so. The heading h
-/// becomes 2φ − h + 180° (φ: the heading that faces the camera), the roll and the
-/// trunk's and neck's sideways bends and twists change sign, the limbs' angles are
-/// exchanged; the root's position and the forward bends are kept.
+/// becomes 2φ − h + 180° (φ: the heading that faces the camera), the rest is
+/// [`exchange_sides`]; the root's position and the forward bends are kept.
 pub fn depth_mirror(pose: &Pose) -> Pose {
     let facing = (-pose[ix::ROOT_TX]).atan2(-pose[ix::ROOT_TZ]).to_degrees();
-    let mut m = *pose;
+    let mut m = exchange_sides(pose);
     let h = 2.0 * facing - pose[ix::ROOT_RY] + 180.0;
     // The same heading within a turn of the original's, so that nothing unwinds.
     m[ix::ROOT_RY] = h - 360.0 * ((h - pose[ix::ROOT_RY]) / 360.0).round();
+    clamp_to_limits(&mut m);
+    m
+}
+
+/// `pose` with left and right exchanged, as in a mirror: the limbs' angles
+/// swapped (the right side's parameters are signed so that equal values are
+/// mirror images), the roll and the trunk's and neck's sideways bends and twists
+/// negated. The root's position and heading and the forward bends are kept.
+pub fn exchange_sides(pose: &Pose) -> Pose {
+    let mut m = *pose;
     for k in [
         ix::ROOT_RZ,
         ix::SPINE + 1,
@@ -344,7 +353,6 @@ pub fn depth_mirror(pose: &Pose) -> Pose {
         ix::R_SHOULDER - ix::L_SHOULDER,
     );
     exchange(&mut m, ix::L_HIP, ix::R_HIP, ix::R_HIP - ix::L_HIP);
-    clamp_to_limits(&mut m);
     m
 }
 
