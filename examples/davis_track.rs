@@ -10,7 +10,7 @@
 //!
 //! ```text
 //! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--one-way]
-//!     [--recover-spike K]
+//!     [--recover-spike K] [--w-prior W]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
@@ -18,7 +18,8 @@
 //! near the outline (`Weights::reward_rim`); `--polish-evals N` sets the joint
 //! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--one-way` leaves out
 //! the second pass (`TrackOptions::two_way`); `--recover-spike K` sets the cost
-//! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none).
+//! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none);
+//! `--w-prior W` weighs the built-in pose prior in (`Weights::prior`, 0 for none).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.
@@ -95,6 +96,7 @@ fn main() -> Result<()> {
     let mut polish_evals = TrackOptions::default().polish_evals;
     let mut two_way = TrackOptions::default().two_way;
     let mut recover_spike = TrackOptions::default().recover_spike;
+    let mut w_prior = TrackOptions::default().weights.prior;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
         if a == "--track-rewards" {
@@ -118,6 +120,12 @@ fn main() -> Result<()> {
                 Some(v) if v.is_finite() && v >= 0.0 => recover_spike = v,
                 _ => bail!("--recover-spike: expected a number ≥ 0"),
             }
+        } else if a == "--w-prior" {
+            let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
+            match v {
+                Some(v) if v.is_finite() && v >= 0.0 => w_prior = v,
+                _ => bail!("--w-prior: expected a number ≥ 0"),
+            }
         } else {
             picture = PathBuf::from(a);
         }
@@ -134,6 +142,7 @@ fn main() -> Result<()> {
     track.polish_evals = polish_evals;
     track.two_way = two_way;
     track.recover_spike = recover_spike;
+    track.weights.prior = w_prior;
 
     let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;

@@ -44,6 +44,19 @@ enum Command {
     Track(TrackArgs),
     /// Accuracy benchmark: synthesise clips from motion capture, track them, compare.
     Bench(BenchArgs),
+    /// Learn a pose prior (how usual each pose is) from a folder of BVH files, for
+    /// `track --pose-prior`.
+    Prior(PriorArgs),
+}
+
+#[derive(Args)]
+struct PriorArgs {
+    /// Folder of BVH files (every one is used, each weighing the same).
+    #[arg(long)]
+    mocap: PathBuf,
+    /// Output prior (JSON, monocap.pose-prior/1).
+    #[arg(short = 'o', long = "out")]
+    out: PathBuf,
 }
 
 #[derive(Args, serde::Serialize)]
@@ -150,6 +163,11 @@ struct WeightArgs {
     /// fit to the silhouettes)
     #[arg(long)]
     whole_pixels: bool,
+    /// Weight of the pose prior (how unusual the pose's joint angles are, learned
+    /// from motion capture); 0 for none (the default for now; 20 is the measured
+    /// weight)
+    #[arg(long, default_value_t = 0.0)]
+    w_prior: f64,
 }
 
 impl WeightArgs {
@@ -161,6 +179,7 @@ impl WeightArgs {
             ("--reward-rim", self.reward_rim),
             ("--w-outline", self.w_outline),
             ("--w-skin", self.w_skin),
+            ("--w-prior", self.w_prior),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
@@ -178,6 +197,7 @@ impl WeightArgs {
         w.outline = self.w_outline;
         w.skin = self.w_skin;
         w.smooth = !self.whole_pixels;
+        w.prior = self.w_prior;
         Ok(())
     }
 }
@@ -275,6 +295,10 @@ struct TrackArgs {
     masks: bool,
     #[command(flatten)]
     weights: WeightArgs,
+    /// A pose prior learned by `monocap prior` (default: the built-in one, learned
+    /// from the benchmark's captures).
+    #[arg(long)]
+    pose_prior: Option<PathBuf>,
     /// Weight w of the inside distance in the coremap (Eq. 3).
     #[arg(long, default_value_t = 1.0)]
     w_core: f64,
@@ -357,6 +381,11 @@ struct BenchArgs {
     /// answer (two searches of up to 9,000 evaluations per probed frame).
     #[arg(long, default_value_t = 0, value_name = "N")]
     basin_probe: usize,
+    /// The pose prior: held-out (for each capture, one learned from the other
+    /// files in the folder), builtin (learned from these captures themselves:
+    /// flattering) or none.
+    #[arg(long, default_value = "held-out")]
+    prior: String,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -513,6 +542,7 @@ fn run(cli: Cli) -> Result<()> {
             Ok(())
         }),
         Command::Bench(a) => bench_command(a),
+        Command::Prior(a) => prior_command(a),
     }
 }
 
@@ -694,6 +724,12 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         oracle_shape: a.oracle_shape,
         seed: a.seed,
         basin_probe: a.basin_probe,
+        prior: match a.prior.as_str() {
+            "held-out" => bench::PriorChoice::HeldOut,
+            "builtin" => bench::PriorChoice::Builtin,
+            "none" => bench::PriorChoice::None,
+            other => anyhow::bail!("--prior {other}: expected held-out, builtin or none"),
+        },
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
@@ -810,6 +846,13 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         "",
         shape_error / reports.len().max(1) as f64
     );
+    let unprimed = reports.iter().filter(|r| !r.prior).count();
+    if opts.prior == bench::PriorChoice::HeldOut && opts.track.weights.prior > 0.0 && unprimed > 0 {
+        println!(
+            "note: {unprimed} clips tracked without a pose prior (no other capture in {} to learn one from)",
+            opts.mocap_dir.display()
+        );
+    }
     let mut joints = [0.0; bench::JOINTS.len()];
     for r in &reports {
         for (j, e) in joints.iter_mut().zip(&r.joint_error_mm) {
@@ -878,6 +921,21 @@ fn print_basins(reports: &[monocap::track::bench::ClipReport], every: usize) {
     line("overall", &all);
 }
 
+/// `monocap prior`: learns a pose prior from a folder of BVH files.
+fn prior_command(a: PriorArgs) -> Result<()> {
+    use monocap::track::prior::{captures_in, PosePrior};
+    let captures = captures_in(&a.mocap)?;
+    let prior = PosePrior::learn(&captures)?;
+    prior.write(&a.out)?;
+    let poses: usize = captures.iter().map(|(_, p)| p.len()).sum();
+    println!(
+        "{}: a pose prior from {} captures ({poses} poses at 30 frames/s)",
+        a.out.display(),
+        captures.len()
+    );
+    Ok(())
+}
+
 /// What `-o` writes, from its extension.
 fn track_command(a: TrackArgs) -> Result<()> {
     use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -915,6 +973,10 @@ fn track_command(a: TrackArgs) -> Result<()> {
     opts.track.init_frame = a.init_frame;
     a.weights.apply(&mut opts.track.weights)?;
     opts.track.features.core_weight = a.w_core;
+    if let Some(p) = &a.pose_prior {
+        let prior = monocap::track::prior::PosePrior::read(p)?;
+        opts.track.pose_prior = Some(std::sync::Arc::new(prior));
+    }
     if let Some(k) = &a.keyframes {
         opts.track.keyframes = read_keyframes(k)?;
     }

@@ -566,3 +566,56 @@ fn bench_seeds_the_clips_noise() {
         "--seed",
     );
 }
+
+/// `monocap prior` learns a pose prior from a folder of BVH files, which `track
+/// --pose-prior` reads; too few poses, an empty folder or a file that is not a
+/// prior are refused in one line.
+#[test]
+fn prior_learns_from_a_folder_and_track_reads_it() {
+    let dir = TempDir::new("cli-prior");
+    let mocap = fixture_mocap(&dir);
+    let out = dir.path("prior.json");
+    // The fixture's 20 frames are fewer poses than the prior's 26 angles.
+    assert_fails_with(
+        "one short capture",
+        &monocap(&["prior", "--mocap", s(&mocap), "-o", s(&out)]),
+        "at least 26 captured poses",
+    );
+    std::fs::copy(FIXTURE, mocap.join("run-again.bvh")).unwrap();
+    let learned = monocap(&["prior", "--mocap", s(&mocap), "-o", s(&out)]);
+    assert_success("prior", &learned);
+    assert!(String::from_utf8_lossy(&learned.stdout).contains("from 2 captures (40 poses"));
+    let text = std::fs::read_to_string(&out).unwrap();
+    assert!(text.contains("\"monocap.pose-prior/1\""), "{text}");
+    let empty = dir.path("empty");
+    std::fs::create_dir_all(&empty).unwrap();
+    assert_fails_with(
+        "an empty folder",
+        &monocap(&["prior", "--mocap", s(&empty), "-o", s(&out)]),
+        "no BVH files",
+    );
+    let bad = dir.write("bad.json", b"{\"format\": \"monocap.truth/1\"}");
+    assert_fails_with(
+        "a file that is not a prior",
+        &monocap(&[
+            "track",
+            "clip.y4m",
+            "-o",
+            s(&dir.path("m.bvh")),
+            "--pose-prior",
+            s(&bad),
+        ]),
+        "bad.json",
+    );
+    assert_fails_with(
+        "a negative weight",
+        &monocap(&[
+            "track",
+            "clip.y4m",
+            "-o",
+            s(&dir.path("m.bvh")),
+            "--w-prior=-1",
+        ]),
+        "--w-prior",
+    );
+}

@@ -64,6 +64,10 @@ pub struct JobOptions {
     /// see `Weights::skin`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_skin: Option<f64>,
+    /// Weight of the built-in pose prior (default 0, none; 20 is the measured
+    /// weight, see `Weights::prior`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_prior: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -179,6 +183,7 @@ impl JobOptions {
             ("reward_rim", self.reward_rim, &mut w.reward_rim),
             ("w_outline", self.w_outline, &mut w.outline),
             ("w_skin", self.w_skin, &mut w.skin),
+            ("w_prior", self.w_prior, &mut w.prior),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {

@@ -17,6 +17,7 @@
 //! - lost frames: frames with a person whose PCK@0.1 (with swaps) is below 0.5.
 
 use std::path::PathBuf;
+use std::sync::Arc;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -24,6 +25,7 @@ use image::RgbImage;
 
 use super::metrics::{self, Accumulator};
 use super::objective::{Evaluator, Target};
+use super::prior::{captures_in, PosePrior};
 use super::simplex::{minimize, SimplexOptions};
 use super::tracker::{FrameInput, Track, TrackOptions, Tracker};
 use crate::body::params::{ix, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE_COUNT};
@@ -85,7 +87,24 @@ pub struct BenchOptions {
     /// Every this many frames with a person (0: never), compare the tracker's
     /// answer with the truth's basin under the fitted shape ([`BasinProbe`]).
     pub basin_probe: usize,
+    /// Which pose prior the tracker weighs in ([`PriorChoice`]).
+    pub prior: PriorChoice,
     pub track: TrackOptions,
+}
+
+/// The pose prior of a benchmark run ([`super::prior`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PriorChoice {
+    /// For each capture, a prior learned from the other BVH files in the folder
+    /// (the default): no clip is tracked with a prior that has seen its motion. A
+    /// folder of one capture has none to learn from: its clips are tracked without
+    /// a prior ([`ClipReport::prior`] says so).
+    HeldOut,
+    /// The built-in prior, which was learned from the benchmark's own captures
+    /// (flattering: for comparison only).
+    Builtin,
+    /// No prior.
+    None,
 }
 
 impl Default for BenchOptions {
@@ -105,6 +124,7 @@ impl Default for BenchOptions {
             oracle_shape: false,
             seed: SynthOptions::default().seed,
             basin_probe: 0,
+            prior: PriorChoice::HeldOut,
             track: TrackOptions::default(),
         }
     }
@@ -139,6 +159,8 @@ pub struct ClipReport {
     /// The truth's basin against the tracker's answer, when asked for
     /// ([`BenchOptions::basin_probe`]).
     pub basin: Option<BasinProbe>,
+    /// Whether the tracker weighed a pose prior in ([`BenchOptions::prior`]).
+    pub prior: bool,
 }
 
 /// Does the objective, with the shape the tracker fitted, prefer a pose near the
@@ -245,10 +267,35 @@ pub fn run(opts: &BenchOptions, mut each: impl FnMut(&ClipReport)) -> Result<Vec
         "no BVH files in {}",
         opts.mocap_dir.display()
     );
+    // The held-out priors learn from every capture in the folder, filtered or not
+    // (none are learned when the prior weighs nothing).
+    let captures = match opts.prior {
+        PriorChoice::HeldOut if opts.track.weights.prior > 0.0 => captures_in(&opts.mocap_dir)?,
+        PriorChoice::HeldOut | PriorChoice::Builtin | PriorChoice::None => Vec::new(),
+    };
     let mut out = Vec::new();
     for file in &files {
         let bvh = Bvh::read(file).with_context(|| format!("reading {}", file.display()))?;
         let name = file.file_name().unwrap_or_default().to_string_lossy();
+        let mut opts = opts.clone();
+        opts.track.pose_prior = match opts.prior {
+            PriorChoice::HeldOut => {
+                let others: Vec<(String, Vec<Pose>)> = captures
+                    .iter()
+                    .filter(|(n, _)| *n != name)
+                    .cloned()
+                    .collect();
+                match others.is_empty() {
+                    true => None,
+                    false => Some(Arc::new(PosePrior::learn(&others).with_context(|| {
+                        format!("learning the pose prior held out from {name}")
+                    })?)),
+                }
+            }
+            PriorChoice::Builtin => Some(PosePrior::builtin()),
+            PriorChoice::None => None,
+        };
+        let opts = &opts;
         for &az in &opts.azimuths {
             for &lead in &opts.lead_in {
                 let r = run_clip(&bvh, &name, az, lead, opts)
@@ -352,6 +399,7 @@ pub fn run_clip(
     let map = JointMap::detect(bvh)?;
     let body = Body::new(&track.shape);
     let mut report = ClipReport {
+        prior: opts.track.pose_prior.is_some() && opts.track.weights.prior > 0.0,
         name: format!("{name} az {azimuth:+.0} lead {lead}"),
         acc: Accumulator::default(),
         lost: 0,
@@ -490,6 +538,7 @@ fn truth_costs(
         |_| true,
         |tf, target| {
             out[tf.index] = Evaluator::new(&body, camera, target, opts.track.weights, None)
+                .with_prior(opts.track.pose_prior.as_deref())
                 .cost(&pose_of(&tf.params));
         },
     );
@@ -598,7 +647,8 @@ fn probe_basins(
         pick,
         |tf, target| {
             let tracked = &track.frames[tf.index];
-            let mut ev = Evaluator::new(&body, camera, target, opts.track.weights, None);
+            let mut ev = Evaluator::new(&body, camera, target, opts.track.weights, None)
+                .with_prior(opts.track.pose_prior.as_deref());
             let mut start = pose_of(&tf.params);
             // The fitted body is not the performer's size: its root goes on the truth's
             // line of sight at the tracker's depth, then is fitted.

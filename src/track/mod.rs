@@ -8,6 +8,7 @@ pub mod metrics;
 pub mod objective;
 pub mod outlines;
 mod prefetch;
+pub mod prior;
 mod refit;
 pub mod run;
 pub mod shading;

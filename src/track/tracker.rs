@@ -52,6 +52,7 @@ use super::objective::{learn_skin, sole_height, Evaluator, Target, Weights};
 use super::outlines::Outlines;
 pub use super::prefetch::MAX_THREADS;
 use super::prefetch::{default_threads, par_map, Prefetch};
+use super::prior::PosePrior;
 use super::refit::{Job, Window};
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
@@ -348,6 +349,9 @@ pub struct TrackOptions {
     pub initial: Option<(ShapeValues, Pose)>,
     /// The person's shape when it is known: the initialisation fits only the pose.
     pub known_shape: Option<ShapeValues>,
+    /// The prior on the pose weighed into F by [`Weights::prior`] (the built-in one
+    /// by default, [`PosePrior::builtin`]; None for none).
+    pub pose_prior: Option<Arc<PosePrior>>,
     /// When set (by another thread), tracking stops with [`TrackError::Canceled`]
     /// at the next step, also inside the initialisation, which reports no frame for
     /// a while (how a service cancels a job promptly).
@@ -386,6 +390,7 @@ impl Default for TrackOptions {
             features: FeatureOptions::default(),
             initial: None,
             known_shape: None,
+            pose_prior: Some(PosePrior::builtin()),
             stop: None,
             threads: 0,
         }
@@ -1854,6 +1859,7 @@ impl<'a> Search<'a> {
             self.weights,
             ground,
         )
+        .with_prior(self.tracker.opts.pose_prior.as_deref())
     }
 
     /// Cost and IoU of `pose` on `target`.

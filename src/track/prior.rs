@@ -1,0 +1,441 @@
+//! A prior on the pose: how usual a body's joint angles are, learned from motion
+//! capture.
+//!
+//! One silhouette leaves much of a pose open: a limb bent towards the camera or away
+//! from it, an upper arm or thigh twisted about its own axis, the pelvis tipped with
+//! the spine bent back to make up for it. Among poses that explain the silhouettes
+//! equally well, people mostly hold the usual ones. The prior is a Gaussian over 26
+//! of the 30 motion parameters (the trunk's pitch and roll and every joint angle;
+//! not the root's position or heading), learned from captured poses and their
+//! mirror images (left and right exchanged, so it favours neither side), each
+//! capture weighing the same. Its cost is robust, `ν · ln(1 + d²/ν)` for the
+//! squared Mahalanobis distance d², so a rare pose the silhouettes demand costs
+//! a bounded amount more than a usual one.
+//!
+//! `monocap prior --mocap DIR -o prior.json` learns one from a folder of BVH files;
+//! `monocap track --pose-prior prior.json` uses it. The built-in prior
+//! (`pose_prior.json` next to this file) was learned from the captures in
+//! `../shared/data/mocap` (README, "The pose prior").
+
+use std::path::Path;
+use std::sync::{Arc, OnceLock};
+
+use anyhow::{bail, ensure, Context, Result};
+use nalgebra::{DMatrix, DVector};
+use serde::{Deserialize, Serialize};
+
+use super::flips::exchange_sides;
+use crate::body::params::{ix, Pose, MOTION, MOTION_COUNT};
+use crate::motion::bvh::Bvh;
+use crate::synth::{synthesize_with, Style, SynthOptions};
+
+/// Format tag of a prior file.
+pub const FORMAT: &str = "monocap.pose-prior/1";
+
+/// The parameters the prior weighs (indices into a [`Pose`]): the trunk's pitch
+/// and roll and every joint angle.
+pub const PRIOR_PARAMS: [usize; PRIOR_DIMS] = {
+    let mut p = [0; PRIOR_DIMS];
+    p[0] = ix::ROOT_RX;
+    p[1] = ix::ROOT_RZ;
+    let mut k = 2;
+    while k < PRIOR_DIMS {
+        p[k] = k + 4;
+        k += 1;
+    }
+    p
+};
+
+/// How many parameters the prior weighs.
+pub const PRIOR_DIMS: usize = MOTION_COUNT - 4;
+
+/// Degrees² added to each variance when learning: no angle is held tighter than a
+/// few degrees, however still it was in the captures.
+const MIN_VARIANCE: f64 = 9.0;
+
+/// Captured poses used per capture at most (evenly spread), so a long capture does
+/// not outweigh the others.
+const POSES_PER_CAPTURE: usize = 400;
+
+/// ν of the robust cost: about the number of parameters weighed, so a usual pose
+/// (d² ≈ ν) sits where the cost begins to flatten.
+const NU: f64 = PRIOR_DIMS as f64;
+
+/// A Gaussian over [`PRIOR_PARAMS`].
+#[derive(Clone, Debug)]
+pub struct PosePrior {
+    mean: [f64; PRIOR_DIMS],
+    /// The inverse covariance, row-major.
+    precision: [[f64; PRIOR_DIMS]; PRIOR_DIMS],
+    /// Where it was learned (file names), for the record.
+    sources: Vec<String>,
+}
+
+/// A prior as stored (JSON).
+#[derive(Serialize, Deserialize)]
+struct PriorFile {
+    format: String,
+    /// The parameters' names, in the order of `mean` and `precision`.
+    params: Vec<String>,
+    mean: Vec<f64>,
+    precision: Vec<Vec<f64>>,
+    sources: Vec<String>,
+}
+
+impl PosePrior {
+    /// Learns the prior from captures (each a list of poses, and its name). Each
+    /// capture weighs the same; every pose also counts mirrored.
+    pub fn learn(captures: &[(String, Vec<Pose>)]) -> Result<PosePrior> {
+        let mut samples: Vec<[f64; PRIOR_DIMS]> = Vec::new();
+        for (_, poses) in captures {
+            let step = poses.len().div_ceil(POSES_PER_CAPTURE).max(1);
+            for pose in poses.iter().step_by(step) {
+                samples.push(pick(pose));
+                samples.push(pick(&exchange_sides(pose)));
+            }
+        }
+        ensure!(
+            samples.len() >= 2 * PRIOR_DIMS,
+            "a pose prior needs at least {PRIOR_DIMS} captured poses, got {}",
+            samples.len() / 2
+        );
+        let n = samples.len() as f64;
+        let mut mean = [0.0; PRIOR_DIMS];
+        for s in &samples {
+            for (m, v) in mean.iter_mut().zip(s) {
+                *m += v / n;
+            }
+        }
+        let mut cov = DMatrix::<f64>::zeros(PRIOR_DIMS, PRIOR_DIMS);
+        for s in &samples {
+            let d = DVector::from_iterator(PRIOR_DIMS, s.iter().zip(&mean).map(|(v, m)| v - m));
+            cov += &d * d.transpose() / n;
+        }
+        for i in 0..PRIOR_DIMS {
+            cov[(i, i)] += MIN_VARIANCE;
+        }
+        let inv = cov
+            .cholesky()
+            .context("the captured poses' covariance is not positive definite")?
+            .inverse();
+        let mut precision = [[0.0; PRIOR_DIMS]; PRIOR_DIMS];
+        for (i, row) in precision.iter_mut().enumerate() {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = inv[(i, j)];
+            }
+        }
+        Ok(PosePrior {
+            mean,
+            precision,
+            sources: captures.iter().map(|(name, _)| name.clone()).collect(),
+        })
+    }
+
+    /// The prior built into monocap (see the module's documentation).
+    pub fn builtin() -> Arc<PosePrior> {
+        static BUILTIN: OnceLock<Arc<PosePrior>> = OnceLock::new();
+        BUILTIN
+            .get_or_init(|| {
+                let p = PosePrior::from_json(include_str!("pose_prior.json"))
+                    .expect("the built-in pose prior parses");
+                Arc::new(p)
+            })
+            .clone()
+    }
+
+    /// The captures it was learned from.
+    pub fn sources(&self) -> &[String] {
+        &self.sources
+    }
+
+    /// The squared Mahalanobis distance of `pose` from the captured poses' mean.
+    pub fn distance2(&self, pose: &Pose) -> f64 {
+        let x = pick(pose);
+        let mut d = [0.0; PRIOR_DIMS];
+        for ((d, x), m) in d.iter_mut().zip(&x).zip(&self.mean) {
+            *d = x - m;
+        }
+        let mut d2 = 0.0;
+        for (di, row) in d.iter().zip(&self.precision) {
+            let s: f64 = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
+            d2 += di * s;
+        }
+        d2.max(0.0)
+    }
+
+    /// The prior's cost of `pose` per unit of weight: `ν · ln(1 + d²/ν)`.
+    pub fn cost(&self, pose: &Pose) -> f64 {
+        NU * (self.distance2(pose) / NU).ln_1p()
+    }
+
+    /// Reads a prior file (as written by [`PosePrior::write`]).
+    pub fn read(path: &Path) -> Result<PosePrior> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("reading the pose prior {}", path.display()))?;
+        PosePrior::from_json(&text).with_context(|| format!("pose prior {}", path.display()))
+    }
+
+    fn from_json(text: &str) -> Result<PosePrior> {
+        let f: PriorFile = serde_json::from_str(text).context("not a pose prior (JSON)")?;
+        if f.format != FORMAT {
+            bail!("format {:?}: expected {FORMAT:?}", f.format);
+        }
+        let names: Vec<&str> = PRIOR_PARAMS.iter().map(|&i| MOTION[i].name).collect();
+        if f.params != names {
+            bail!("params: expected {}", names.join(", "));
+        }
+        ensure!(
+            f.mean.len() == PRIOR_DIMS
+                && f.precision.len() == PRIOR_DIMS
+                && f.precision.iter().all(|r| r.len() == PRIOR_DIMS),
+            "mean and precision: expected {PRIOR_DIMS} values and {PRIOR_DIMS}×{PRIOR_DIMS}"
+        );
+        ensure!(
+            f.mean
+                .iter()
+                .chain(f.precision.iter().flatten())
+                .all(|v| v.is_finite()),
+            "mean and precision: expected finite numbers"
+        );
+        let mut mean = [0.0; PRIOR_DIMS];
+        mean.copy_from_slice(&f.mean);
+        let mut precision = [[0.0; PRIOR_DIMS]; PRIOR_DIMS];
+        for (row, r) in precision.iter_mut().zip(&f.precision) {
+            row.copy_from_slice(r);
+        }
+        let p = PosePrior {
+            mean,
+            precision,
+            sources: f.sources,
+        };
+        // A precision that is not positive definite would reward some poses
+        // without bound.
+        let m = DMatrix::from_fn(PRIOR_DIMS, PRIOR_DIMS, |i, j| p.precision[i][j]);
+        ensure!(
+            m.cholesky().is_some(),
+            "precision: expected a positive definite matrix"
+        );
+        Ok(p)
+    }
+
+    /// Writes the prior as JSON.
+    pub fn write(&self, path: &Path) -> Result<()> {
+        let f = PriorFile {
+            format: FORMAT.to_string(),
+            params: PRIOR_PARAMS
+                .iter()
+                .map(|&i| MOTION[i].name.to_string())
+                .collect(),
+            mean: self.mean.to_vec(),
+            precision: self.precision.iter().map(|r| r.to_vec()).collect(),
+            sources: self.sources.clone(),
+        };
+        let text = serde_json::to_string_pretty(&f)?;
+        std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
+    }
+}
+
+/// The retargeted model's poses of every frame of a capture (at 30 frames/s), as
+/// `monocap synth` poses it.
+pub fn capture_poses(bvh: &Bvh, name: &str) -> Result<Vec<Pose>> {
+    // Rendered small and thrown away: only the poses are wanted.
+    let opts = SynthOptions {
+        width: 32,
+        height: 24,
+        style: Style::Silhouette,
+        ..SynthOptions::default()
+    };
+    let truth = synthesize_with(bvh, name, &opts, |_| Ok(()))?;
+    truth
+        .frames
+        .iter()
+        .map(|f| {
+            Pose::try_from(f.params.as_slice())
+                .map_err(|_| anyhow::anyhow!("{name}: a pose of {} values", f.params.len()))
+        })
+        .collect()
+}
+
+/// Each BVH file in `dir` (sorted by name) and its poses ([`capture_poses`]).
+pub fn captures_in(dir: &Path) -> Result<Vec<(String, Vec<Pose>)>> {
+    let mut files: Vec<_> = std::fs::read_dir(dir)
+        .with_context(|| format!("reading {}", dir.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case("bvh")))
+        .collect();
+    files.sort();
+    ensure!(!files.is_empty(), "no BVH files in {}", dir.display());
+    files
+        .iter()
+        .map(|f| {
+            let name = f
+                .file_name()
+                .unwrap_or_default()
+                .to_string_lossy()
+                .to_string();
+            let bvh = Bvh::read(f).with_context(|| format!("reading {}", f.display()))?;
+            let poses = capture_poses(&bvh, &name).with_context(|| format!("posing {name}"))?;
+            Ok((name, poses))
+        })
+        .collect()
+}
+
+fn pick(pose: &Pose) -> [f64; PRIOR_DIMS] {
+    PRIOR_PARAMS.map(|i| pose[i])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::params::ix;
+
+    // Within a group the angles go x, z, y ([`MOTION`]).
+    const SPINE_Y: usize = ix::SPINE + 2;
+    const L_SHOULDER_X: usize = ix::L_SHOULDER;
+    const L_SHOULDER_Z: usize = ix::L_SHOULDER + 1;
+    const L_SHOULDER_Y: usize = ix::L_SHOULDER + 2;
+    const R_SHOULDER_X: usize = ix::R_SHOULDER;
+    const R_SHOULDER_Z: usize = ix::R_SHOULDER + 1;
+    const L_HIP_X: usize = ix::L_HIP;
+    const L_HIP_Y: usize = ix::L_HIP + 2;
+    const R_HIP_X: usize = ix::R_HIP;
+    const R_HIP_Y: usize = ix::R_HIP + 2;
+
+    /// Poses of a walk-like swing: the thighs and arms swing in opposition, the
+    /// knees and elbows bend a little, the twists stay near 0.
+    fn swinging() -> Vec<Pose> {
+        (0..200)
+            .map(|k| {
+                let t = k as f64 * 0.1;
+                let mut p = [0.0; MOTION_COUNT];
+                p[ix::ROOT_TZ] = 300.0;
+                p[L_HIP_X] = 25.0 * t.sin();
+                p[R_HIP_X] = -25.0 * t.sin();
+                p[ix::L_KNEE] = 20.0 + 15.0 * (2.0 * t).sin();
+                p[ix::R_KNEE] = 20.0 - 15.0 * (2.0 * t).sin();
+                p[L_SHOULDER_X] = -15.0 * t.sin();
+                p[R_SHOULDER_X] = 15.0 * t.sin();
+                p[ix::L_ELBOW] = 15.0 + 5.0 * t.cos();
+                p[ix::R_ELBOW] = 15.0 - 5.0 * t.cos();
+                p[L_SHOULDER_Z] = 8.0;
+                p[R_SHOULDER_Z] = 8.0;
+                p[SPINE_Y] = 3.0 * (1.3 * t).sin();
+                p
+            })
+            .collect()
+    }
+
+    fn learned() -> PosePrior {
+        PosePrior::learn(&[("walk".to_string(), swinging())]).expect("learns")
+    }
+
+    #[test]
+    fn a_usual_pose_costs_less_than_one_twisted_or_tipped() {
+        let prior = learned();
+        let usual = swinging()[37];
+        let base = prior.cost(&usual);
+        for (param, by) in [(L_SHOULDER_Y, 40.0), (R_HIP_Y, -30.0), (ix::ROOT_RX, 20.0)] {
+            let mut odd = usual;
+            odd[param] += by;
+            assert!(
+                prior.cost(&odd) > base + 5.0,
+                "{} moved by {by}: {} against {base}",
+                MOTION[param].name,
+                prior.cost(&odd)
+            );
+        }
+        // The root's position and heading are not weighed.
+        let mut moved = usual;
+        moved[ix::ROOT_TX] += 80.0;
+        moved[ix::ROOT_RY] += 120.0;
+        assert!((prior.cost(&moved) - base).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_cost_is_bounded_in_growth_and_favours_neither_side() {
+        let prior = learned();
+        let usual = swinging()[11];
+        // Mirrored poses were learned too: a pose and its mirror image cost the same.
+        let mirrored = exchange_sides(&usual);
+        assert!(
+            (prior.cost(&usual) - prior.cost(&mirrored)).abs() < 1e-6 * prior.cost(&usual).max(1.0)
+        );
+        // Robust: four times as far costs far less than sixteen times as much.
+        let mut a = usual;
+        a[ix::L_ELBOW] += 30.0;
+        let mut b = usual;
+        b[ix::L_ELBOW] += 120.0;
+        let (ca, cb) = (
+            prior.cost(&a) - prior.cost(&usual),
+            prior.cost(&b) - prior.cost(&usual),
+        );
+        assert!(ca > 0.0 && cb > ca && cb < 8.0 * ca, "{ca} {cb}");
+    }
+
+    #[test]
+    fn a_prior_survives_a_round_trip_through_its_file() {
+        let prior = learned();
+        let dir = std::env::temp_dir().join(format!("monocap-prior-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("prior.json");
+        prior.write(&path).unwrap();
+        let back = PosePrior::read(&path).unwrap();
+        assert_eq!(back.sources(), ["walk"]);
+        for pose in swinging().iter().step_by(17) {
+            assert!((back.cost(pose) - prior.cost(pose)).abs() < 1e-9 * prior.cost(pose).max(1.0));
+        }
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn bad_prior_files_are_refused_with_the_reason() {
+        let good: serde_json::Value =
+            serde_json::from_str(include_str!("pose_prior.json")).expect("JSON");
+        let check = |edit: &dyn Fn(&mut serde_json::Value), want: &str| {
+            let mut v = good.clone();
+            edit(&mut v);
+            let err = PosePrior::from_json(&v.to_string()).expect_err(want);
+            assert!(format!("{err:#}").contains(want), "{err:#} lacks {want:?}");
+        };
+        check(
+            &|v| v["format"] = "monocap.truth/1".into(),
+            "expected \"monocap.pose-prior/1\"",
+        );
+        check(
+            &|v| v["params"][3] = "l_knee".into(),
+            "params: expected root_rx",
+        );
+        check(
+            &|v| {
+                v["mean"].as_array_mut().unwrap().pop();
+            },
+            "expected 26 values",
+        );
+        check(
+            &|v| {
+                for i in 0..PRIOR_DIMS {
+                    v["precision"][i][i] = (-1.0).into();
+                }
+            },
+            "positive definite",
+        );
+        assert!(PosePrior::from_json("[1, 2]").is_err());
+        assert!(PosePrior::learn(&[("one".to_string(), swinging()[..3].to_vec())]).is_err());
+    }
+
+    #[test]
+    fn the_built_in_prior_was_learned_from_the_nine_captures() {
+        let prior = PosePrior::builtin();
+        assert_eq!(prior.sources().len(), 9, "{:?}", prior.sources());
+        // A body standing with its arms down is a usual pose; one with both
+        // thighs twisted far out is not.
+        let mut stand = [0.0; MOTION_COUNT];
+        stand[ix::ROOT_TZ] = 300.0;
+        stand[L_SHOULDER_Z] = 10.0;
+        stand[R_SHOULDER_Z] = 10.0;
+        let mut odd = stand;
+        odd[L_HIP_Y] = 60.0;
+        odd[R_HIP_Y] = 60.0;
+        assert!(prior.cost(&odd) > prior.cost(&stand) + 10.0);
+    }
+}
