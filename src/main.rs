@@ -974,6 +974,12 @@ fn track_command(a: TrackArgs) -> Result<()> {
     a.weights.apply(&mut opts.track.weights)?;
     opts.track.features.core_weight = a.w_core;
     if let Some(p) = &a.pose_prior {
+        if opts.track.weights.prior == 0.0 {
+            anyhow::bail!(
+                "--pose-prior {}: the prior weighs nothing with --w-prior 0 (the default); give --w-prior too (20 was measured)",
+                p.display()
+            );
+        }
         let prior = monocap::track::prior::PosePrior::read(p)?;
         opts.track.pose_prior = Some(std::sync::Arc::new(prior));
     }

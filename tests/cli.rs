@@ -604,8 +604,22 @@ fn prior_learns_from_a_folder_and_track_reads_it() {
             s(&dir.path("m.bvh")),
             "--pose-prior",
             s(&bad),
+            "--w-prior",
+            "20",
         ]),
         "bad.json",
+    );
+    assert_fails_with(
+        "a prior that would weigh nothing",
+        &monocap(&[
+            "track",
+            "clip.y4m",
+            "-o",
+            s(&dir.path("m.bvh")),
+            "--pose-prior",
+            s(&out),
+        ]),
+        "--w-prior",
     );
     assert_fails_with(
         "a negative weight",

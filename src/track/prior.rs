@@ -13,7 +13,8 @@
 //! a bounded amount more than a usual one.
 //!
 //! `monocap prior --mocap DIR -o prior.json` learns one from a folder of BVH files;
-//! `monocap track --pose-prior prior.json` uses it. The built-in prior
+//! `monocap track --w-prior 20 --pose-prior prior.json` uses it (`--w-prior` alone,
+//! the built-in one; the weight is 0, no prior, by default for now). The built-in prior
 //! (`pose_prior.json` next to this file) was learned from the captures in
 //! `../shared/data/mocap` (README, "The pose prior").
 
