@@ -51,7 +51,7 @@ enum Command {
 
 #[derive(Args)]
 struct PriorArgs {
-    /// Folder of BVH files (every one is used, each weighing the same).
+    /// Folder of BVH files (every one is used, at most 400 poses of each).
     #[arg(long)]
     mocap: PathBuf,
     /// Output prior (JSON, monocap.pose-prior/1).

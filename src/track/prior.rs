@@ -7,8 +7,8 @@
 //! equally well, people mostly hold the usual ones. The prior is a Gaussian over 26
 //! of the 30 motion parameters (the trunk's pitch and roll and every joint angle;
 //! not the root's position or heading), learned from captured poses and their
-//! mirror images (left and right exchanged, so it favours neither side), each
-//! capture weighing the same. Its cost is robust, `ν · ln(1 + d²/ν)` for the
+//! mirror images (left and right exchanged, so it favours neither side), at most
+//! 400 poses of each capture so that no long one outweighs the rest. Its cost is robust, `ν · ln(1 + d²/ν)` for the
 //! squared Mahalanobis distance d², so a rare pose the silhouettes demand costs
 //! a bounded amount more than a usual one.
 //!
@@ -84,8 +84,9 @@ struct PriorFile {
 }
 
 impl PosePrior {
-    /// Learns the prior from captures (each a list of poses, and its name). Each
-    /// capture weighs the same; every pose also counts mirrored.
+    /// Learns the prior from captures (each a list of poses, and its name): at most
+    /// [`POSES_PER_CAPTURE`] poses of each, evenly spread, and every pose also
+    /// mirrored.
     pub fn learn(captures: &[(String, Vec<Pose>)]) -> Result<PosePrior> {
         let mut samples: Vec<[f64; PRIOR_DIMS]> = Vec::new();
         for (_, poses) in captures {
