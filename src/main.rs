@@ -295,8 +295,9 @@ struct TrackArgs {
     masks: bool,
     #[command(flatten)]
     weights: WeightArgs,
-    /// A pose prior learned by `monocap prior` (default: the built-in one, learned
-    /// from the benchmark's captures).
+    /// A pose prior learned by `monocap prior`, weighed in by --w-prior (which must
+    /// then be above 0; without this flag --w-prior weighs the built-in prior,
+    /// learned from the benchmark's captures).
     #[arg(long)]
     pose_prior: Option<PathBuf>,
     /// Weight w of the inside distance in the coremap (Eq. 3).

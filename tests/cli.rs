@@ -595,41 +595,21 @@ fn prior_learns_from_a_folder_and_track_reads_it() {
         "no BVH files",
     );
     let bad = dir.write("bad.json", b"{\"format\": \"monocap.truth/1\"}");
+    let m = dir.path("m.bvh");
+    let track = |extra: &[&str]| {
+        let mut args = vec!["track", "clip.y4m", "-o", s(&m)];
+        args.extend_from_slice(extra);
+        monocap(&args)
+    };
     assert_fails_with(
         "a file that is not a prior",
-        &monocap(&[
-            "track",
-            "clip.y4m",
-            "-o",
-            s(&dir.path("m.bvh")),
-            "--pose-prior",
-            s(&bad),
-            "--w-prior",
-            "20",
-        ]),
+        &track(&["--pose-prior", s(&bad), "--w-prior", "20"]),
         "bad.json",
     );
     assert_fails_with(
         "a prior that would weigh nothing",
-        &monocap(&[
-            "track",
-            "clip.y4m",
-            "-o",
-            s(&dir.path("m.bvh")),
-            "--pose-prior",
-            s(&out),
-        ]),
+        &track(&["--pose-prior", s(&out)]),
         "--w-prior",
     );
-    assert_fails_with(
-        "a negative weight",
-        &monocap(&[
-            "track",
-            "clip.y4m",
-            "-o",
-            s(&dir.path("m.bvh")),
-            "--w-prior=-1",
-        ]),
-        "--w-prior",
-    );
+    assert_fails_with("a negative weight", &track(&["--w-prior=-1"]), "--w-prior");
 }
