@@ -26,12 +26,33 @@ use crate::body::params::{clamp_to_limits, ix, Group, Pose, MOTION};
 use crate::body::skeleton::{joints_moved_by, Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
 use crate::body::Body;
 
-/// One flip: the bones it moves, each (end, its parent, flipped or kept), parents
-/// first; the groups whose angles are refitted; the angle mirrored in the inverse
-/// kinematics' second start.
+/// What a flip does with the far end of one bone.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum End {
+    /// It keeps its side of its parent in depth.
+    Kept,
+    /// It goes to the other side: the flip has no point unless it moves.
+    Flipped,
+    /// It goes to the other side too, as part of the flipped bone above it (the
+    /// whole arm turned with the trunk); it may barely move.
+    Follows,
+}
+
+/// [`End::Flipped`] when `flip`, [`End::Kept`] otherwise.
+const fn end(flip: bool) -> End {
+    if flip {
+        End::Flipped
+    } else {
+        End::Kept
+    }
+}
+
+/// One flip: the bones it moves, each (end, its parent, what happens to the end),
+/// parents first; the groups whose angles are refitted; the angle mirrored in the
+/// inverse kinematics' second start.
 pub struct Flip {
     pub name: &'static str,
-    bones: &'static [(usize, usize, bool)],
+    bones: &'static [(usize, usize, End)],
     pub groups: &'static [Group],
     mirror: usize,
 }
@@ -63,9 +84,9 @@ macro_rules! arm {
         Flip {
             name: $name,
             bones: &[
-                (j(J::$e), j(J::$s), $up),
-                (j(J::$h), j(J::$e), $low),
-                (t(Tip::$tip), j(J::$h), false),
+                (j(J::$e), j(J::$s), end($up)),
+                (j(J::$h), j(J::$e), end($low)),
+                (t(Tip::$tip), j(J::$h), End::Kept),
             ],
             groups: &[Group::$group],
             mirror: $mirror,
@@ -86,10 +107,10 @@ macro_rules! leg {
         Flip {
             name: $name,
             bones: &[
-                (j(J::$k), j(J::$hip), $up),
-                (j(J::$a), j(J::$k), $low),
-                (j(J::$toe), j(J::$a), false),
-                (t(Tip::$tip), j(J::$toe), false),
+                (j(J::$k), j(J::$hip), end($up)),
+                (j(J::$a), j(J::$k), end($low)),
+                (j(J::$toe), j(J::$a), End::Kept),
+                (t(Tip::$tip), j(J::$toe), End::Kept),
             ],
             groups: &[Group::$group],
             mirror: $mirror,
@@ -97,30 +118,42 @@ macro_rules! leg {
     };
 }
 
-/// The flips tried: the trunk, the head, and each limb's upper bone, lower bone and
-/// both.
-pub const FLIPS: [Flip; 14] = [
-    Flip {
-        name: "spine",
-        bones: &[
-            (NECK, j(J::Spine), true),
-            (j(J::LeftArm), j(J::Spine), true),
-            (j(J::RightArm), j(J::Spine), true),
-            (HEAD, NECK, false),
-            (HEAD_TOP, HEAD, false),
-            (j(J::LeftForeArm), j(J::LeftArm), false),
-            (j(J::LeftHand), j(J::LeftForeArm), false),
-            (t(Tip::LeftHandTip), j(J::LeftHand), false),
-            (j(J::RightForeArm), j(J::RightArm), false),
-            (j(J::RightHand), j(J::RightForeArm), false),
-            (t(Tip::RightHandTip), j(J::RightHand), false),
-        ],
-        groups: &[Group::Torso, Group::LeftArm, Group::RightArm],
-        mirror: ix::SPINE,
-    },
+/// The trunk's flip: the neck and shoulders to the other side of the spine's
+/// joint in depth, the head carried; the arms below the shoulders `arms`: kept on
+/// their side (the hands still seen where they were, as arms hanging under gravity
+/// stay) or following the trunk (the whole upper body mirrored, as arms held to
+/// the trunk are).
+macro_rules! trunk {
+    ($name:expr, $arms:expr) => {
+        Flip {
+            name: $name,
+            bones: &[
+                (NECK, j(J::Spine), End::Flipped),
+                (j(J::LeftArm), j(J::Spine), End::Flipped),
+                (j(J::RightArm), j(J::Spine), End::Flipped),
+                (HEAD, NECK, End::Kept),
+                (HEAD_TOP, HEAD, End::Kept),
+                (j(J::LeftForeArm), j(J::LeftArm), $arms),
+                (j(J::LeftHand), j(J::LeftForeArm), $arms),
+                (t(Tip::LeftHandTip), j(J::LeftHand), $arms),
+                (j(J::RightForeArm), j(J::RightArm), $arms),
+                (j(J::RightHand), j(J::RightForeArm), $arms),
+                (t(Tip::RightHandTip), j(J::RightHand), $arms),
+            ],
+            groups: &[Group::Torso, Group::LeftArm, Group::RightArm],
+            mirror: ix::SPINE,
+        }
+    };
+}
+
+/// The flips tried: the trunk (with the arms kept or following), the head, and
+/// each limb's upper bone, lower bone and both.
+pub const FLIPS: [Flip; 15] = [
+    trunk!("spine", End::Kept),
+    trunk!("spine with the arms", End::Follows),
     Flip {
         name: "neck",
-        bones: &[(HEAD, NECK, true), (HEAD_TOP, HEAD, true)],
+        bones: &[(HEAD, NECK, End::Flipped), (HEAD_TOP, HEAD, End::Flipped)],
         groups: &[Group::Torso],
         mirror: ix::NECK,
     },
@@ -182,19 +215,18 @@ impl Flip {
     pub fn apply(&self, body: &Body, pose: &Pose) -> Option<Pose> {
         let now = body.posed(pose).landmarks();
         let mut target = now;
-        for &(end, parent, flip) in self.bones {
+        for &(end, parent, how) in self.bones {
             let p0 = now[parent];
             let sight = p0.coords.try_normalize(1e-9)?;
             let side = (now[end] - p0).dot(&sight);
             let r = (now[end] - p0).norm();
-            target[end] = along_ray(now[end], target[parent], r, side, flip);
+            target[end] = along_ray(now[end], target[parent], r, side, how != End::Kept);
         }
         // Every flipped bone must move: a composite flip one of whose bones lies
         // across its line of sight is the other bone's flip, tried on its own.
-        let still = self
-            .bones
-            .iter()
-            .any(|&(end, _, flip)| flip && (target[end] - now[end]).norm() < MIN_MOVE_CM);
+        let still = self.bones.iter().any(|&(end, _, how)| {
+            how == End::Flipped && (target[end] - now[end]).norm() < MIN_MOVE_CM
+        });
         if still {
             return None;
         }
@@ -522,6 +554,39 @@ mod tests {
         // The arms are carried: the hands are still seen about where they were.
         let px = pixels_apart(&a.joint(Joint::LeftHand), &b.joint(Joint::LeftHand));
         assert!(px < 4.0, "the left hand moved {px:.1} px in the image");
+    }
+
+    #[test]
+    fn a_trunk_bent_backwards_flips_to_one_bent_forwards_with_the_arms_following() {
+        // The arms held slightly apart, straight along the trunk.
+        let set = [
+            (ix::SPINE, -25.0),
+            (ix::L_SHOULDER + 1, 10.0),
+            (ix::R_SHOULDER + 1, 10.0),
+        ];
+        let (a, b) = flipped("spine with the arms", -10.0, &set);
+        let neck = |p: &Posed| p.joint(Joint::Neck);
+        let px = pixels_apart(&neck(&a), &neck(&b));
+        assert!(px < 3.0, "the neck moved {px:.1} px in the image");
+        let spine = a.joint(Joint::Spine).z;
+        let (before, after) = (neck(&a).z - spine, neck(&b).z - spine);
+        assert!(
+            before < -10.0 && after > 10.0,
+            "depth {before:.1} -> {after:.1}"
+        );
+        // The hands turn with the trunk, away from the camera as the shoulders come
+        // nearer (the "spine" flip keeps them on their side of the shoulders, and so
+        // brings them nearer with them).
+        let (_, kept) = flipped("spine", -10.0, &set);
+        for hand in [Joint::LeftHand, Joint::RightHand] {
+            let depth = |p: &Posed| p.joint(hand).z - spine;
+            let (before, after, kept) = (depth(&a), depth(&b), depth(&kept));
+            println!("{hand:?}: depth {before:.1} -> {after:.1} cm (kept: {kept:.1})");
+            assert!(
+                after < before - 5.0 && after < kept - 5.0,
+                "{hand:?}: depth {before:.1} -> {after:.1} (kept: {kept:.1})"
+            );
+        }
     }
 
     #[test]
