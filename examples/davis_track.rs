@@ -19,7 +19,8 @@
 //! polish's budget (`TrackOptions::polish_evals`, 0 for none); `--one-way` leaves out
 //! the second pass (`TrackOptions::two_way`); `--recover-spike K` sets the cost
 //! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none);
-//! `--w-prior W` weighs the built-in pose prior in (`Weights::prior`, 0 for none).
+//! `--w-prior W` weighs the built-in pose prior in (`Weights::prior`, 20 by
+//! default, 0 for none).
 //!
 //! Data: `../shared/data/davis/<seq>/{masks/*.png, frames/*.jpg}` next to the
 //! crate; when absent the example says so and exits successfully.

@@ -164,9 +164,8 @@ struct WeightArgs {
     #[arg(long)]
     whole_pixels: bool,
     /// Weight of the pose prior (how unusual the pose's joint angles are, learned
-    /// from motion capture); 0 for none (the default for now; 20 is the measured
-    /// weight)
-    #[arg(long, default_value_t = 0.0)]
+    /// from motion capture); 0 for none
+    #[arg(long, default_value_t = monocap::track::objective::PRIOR_WEIGHT)]
     w_prior: f64,
 }
 
@@ -296,8 +295,8 @@ struct TrackArgs {
     #[command(flatten)]
     weights: WeightArgs,
     /// A pose prior learned by `monocap prior`, weighed in by --w-prior (which must
-    /// then be above 0; without this flag --w-prior weighs the built-in prior,
-    /// learned from the benchmark's captures).
+    /// then be above 0), instead of the built-in prior, learned from the
+    /// benchmark's captures.
     #[arg(long)]
     pose_prior: Option<PathBuf>,
     /// Weight w of the inside distance in the coremap (Eq. 3).
@@ -977,7 +976,7 @@ fn track_command(a: TrackArgs) -> Result<()> {
     if let Some(p) = &a.pose_prior {
         if opts.track.weights.prior == 0.0 {
             anyhow::bail!(
-                "--pose-prior {}: the prior weighs nothing with --w-prior 0 (the default); give --w-prior too (20 was measured)",
+                "--pose-prior {}: the prior weighs nothing with --w-prior 0",
                 p.display()
             );
         }

@@ -568,8 +568,8 @@ fn bench_seeds_the_clips_noise() {
 }
 
 /// `monocap prior` learns a pose prior from a folder of BVH files, which `track
-/// --pose-prior` reads; too few poses, an empty folder or a file that is not a
-/// prior are refused in one line.
+/// --pose-prior` tracks with; too few poses, an empty folder, a file that is not a
+/// prior or a prior weighed by 0 are refused in one line.
 #[test]
 fn prior_learns_from_a_folder_and_track_reads_it() {
     let dir = TempDir::new("cli-prior");
@@ -596,11 +596,18 @@ fn prior_learns_from_a_folder_and_track_reads_it() {
     );
     let bad = dir.write("bad.json", b"{\"format\": \"monocap.truth/1\"}");
     let m = dir.path("m.bvh");
+    let clip = dir.path("clip.y4m");
+    assert_success("synth", &synth(&clip, &["--style", "silhouette"]));
     let track = |extra: &[&str]| {
-        let mut args = vec!["track", "clip.y4m", "-o", s(&m)];
+        let mut args = vec!["track", s(&clip), "--masks", "-o", s(&m)];
         args.extend_from_slice(extra);
         monocap(&args)
     };
+    assert_success(
+        "track with the learned prior",
+        &track(&["--pose-prior", s(&out)]),
+    );
+    assert!(m.is_file());
     assert_fails_with(
         "a file that is not a prior",
         &track(&["--pose-prior", s(&bad), "--w-prior", "20"]),
@@ -608,8 +615,8 @@ fn prior_learns_from_a_folder_and_track_reads_it() {
     );
     assert_fails_with(
         "a prior that would weigh nothing",
-        &track(&["--pose-prior", s(&out)]),
-        "--w-prior",
+        &track(&["--pose-prior", s(&out), "--w-prior", "0"]),
+        "--w-prior 0",
     );
     assert_fails_with("a negative weight", &track(&["--w-prior=-1"]), "--w-prior");
 }

@@ -64,8 +64,8 @@ pub struct JobOptions {
     /// see `Weights::skin`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_skin: Option<f64>,
-    /// Weight of the built-in pose prior (default 0, none; 20 is the measured
-    /// weight, see `Weights::prior`).
+    /// Weight of the built-in pose prior (default 20, 0 for none; see
+    /// `Weights::prior`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_prior: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the

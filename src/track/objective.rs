@@ -21,7 +21,7 @@
 //! moving parts' pixels not already covered. Nothing is allocated per evaluation.
 
 use super::outlines::FrameEdges;
-use super::prior::PosePrior;
+use super::prior::{PosePrior, PriorFocus};
 use crate::body::params::{within_limits, Pose};
 use crate::body::parts::Material;
 use crate::body::raster::{render_fragments, render_parts, span_parts, Fragments, Mask, PartSpans};
@@ -87,19 +87,17 @@ pub struct Weights {
     /// speed (README, "Whole pixels or shares of them").
     pub smooth: bool,
     /// Per unit of the pose prior's cost ([`PosePrior::cost`]), when the tracker has
-    /// a prior ([`crate::track::tracker::TrackOptions::pose_prior`]); 0 for none (the
-    /// default for now; [`PRIOR_WEIGHT`] is the measured weight).
+    /// a prior ([`crate::track::tracker::TrackOptions::pose_prior`]); 0 for none.
+    /// [`PRIOR_WEIGHT`] by default.
     pub prior: f64,
 }
 
-/// The measured [`Weights::prior`] (`--w-prior 20`; not the default yet: with it
-/// three of the tracker's scenario tests in `tests/track.rs` fail and the speed falls
-/// below 10 frames/s). Over the accuracy benchmark's six runs (seeds 1–3,
-/// with and without a person-free lead-in, each capture's clips tracked with a prior
-/// learned from the other captures) against no prior: PA-MPJPE 110.1 → 95.9 mm,
-/// PCK@0.1 0.876 → 0.882, model IoU 0.910 → 0.905, lost frames 25 → 54 (47 of them
-/// on one clip), a median 10.4 → 9.6 frames/s; at 60 the model IoU fell below 0.90
-/// (README, "The pose prior").
+/// The default [`Weights::prior`] (`--w-prior 20`). Over the accuracy benchmark's
+/// six runs (seeds 1–3, with and without a person-free lead-in, each capture's clips
+/// tracked with a prior learned from the other captures) against no prior:
+/// PA-MPJPE 110.1 → 95.5 mm, PCK@0.1 0.876 → 0.884, model IoU 0.910 → 0.905, lost
+/// frames 25 → 40 (33 of them on one clip), 4% more wall time; at 60 the model IoU
+/// fell below 0.90 (README, "The pose prior").
 pub const PRIOR_WEIGHT: f64 = 20.0;
 
 impl Default for Weights {
@@ -113,18 +111,20 @@ impl Default for Weights {
             outline: OUTLINE_WEIGHT,
             skin: 0.0,
             smooth: true,
-            prior: 0.0,
+            prior: PRIOR_WEIGHT,
         }
     }
 }
 
 impl Weights {
     /// The paper's objective: edge and region rewards wherever the features put
-    /// them, while tracking as in the initialisation, and whole pixels.
+    /// them, while tracking as in the initialisation, whole pixels, and no pose
+    /// prior.
     pub fn paper() -> Weights {
         Weights {
             track_rewards: true,
             smooth: false,
+            prior: 0.0,
             ..Weights::default()
         }
     }
@@ -393,6 +393,8 @@ pub struct Evaluator<'a> {
     pub evals: u64,
     /// The pose prior, weighed by [`Weights::prior`] ([`Evaluator::with_prior`]).
     prior: Option<&'a PosePrior>,
+    /// The prior at the focus's base pose ([`Evaluator::focus`]).
+    prior_focus: Option<PriorFocus>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -430,6 +432,7 @@ impl<'a> Evaluator<'a> {
             limb_free,
             evals: 0,
             prior: None,
+            prior_focus: None,
         }
     }
 
@@ -441,8 +444,14 @@ impl<'a> Evaluator<'a> {
 
     /// The pose prior's share of F at `pose`.
     fn prior_cost(&self, pose: &Pose) -> f64 {
-        self.prior
-            .map_or(0.0, |p| self.weights.prior * p.cost(pose))
+        let Some(p) = self.prior else {
+            return 0.0;
+        };
+        let cost = match &self.prior_focus {
+            Some(focus) => p.focused_cost(focus, pose),
+            None => p.cost(pose),
+        };
+        self.weights.prior * cost
     }
 
     /// From now on only the parameters `params` change (the others keep their values
@@ -460,6 +469,7 @@ impl<'a> Evaluator<'a> {
             .collect();
         self.body.skeleton.pose(pose, &mut self.base);
         self.moved = Some(moves);
+        self.prior_focus = self.prior.map(|p| p.focus(pose, params));
         if let Some(sm) = &mut self.smooth {
             sm.focus(self.body, &self.base, self.cam, self.target, &moves);
             return;
@@ -497,6 +507,7 @@ impl<'a> Evaluator<'a> {
     /// Every part moves again.
     pub fn unfocus(&mut self) {
         self.moved = None;
+        self.prior_focus = None;
         if let Some(sm) = &mut self.smooth {
             sm.unfocus();
             return;
@@ -1254,6 +1265,15 @@ mod tests {
                     "{with} - {none} vs {want}"
                 );
                 assert!((ev.terms(&p, &f).prior - want).abs() < 1e-9 * want);
+                // Focused on the left leg (which `odd` moves), the same.
+                let leg: Vec<usize> = (ix::L_HIP..ix::L_HIP + 4).collect();
+                ev.focus(&pose, &leg);
+                let focused = ev.cost(&p);
+                ev.unfocus();
+                assert!(
+                    (focused - with).abs() < 1e-6 * with.abs().max(1.0),
+                    "{focused} vs {with}"
+                );
             }
         }
     }

@@ -13,9 +13,9 @@
 //! a bounded amount more than a usual one.
 //!
 //! `monocap prior --mocap DIR -o prior.json` learns one from a folder of BVH files;
-//! `monocap track --w-prior 20 --pose-prior prior.json` uses it (`--w-prior` alone,
-//! the built-in one; the weight is 0, no prior, by default for now). The built-in prior
-//! (`pose_prior.json` next to this file) was learned from the captures in
+//! `monocap track --pose-prior prior.json` uses it instead of the built-in one,
+//! which is weighed in by default (`--w-prior 20`; 0 for no prior). The built-in
+//! prior (`pose_prior.json` next to this file) was learned from the captures in
 //! `../shared/data/mocap` (README, "The pose prior").
 
 use std::path::Path;
@@ -70,6 +70,24 @@ pub struct PosePrior {
     precision: [[f64; PRIOR_DIMS]; PRIOR_DIMS],
     /// Where it was learned (file names), for the record.
     sources: Vec<String>,
+}
+
+/// The prior at a base pose, for poses that move a few of its parameters
+/// ([`PosePrior::focus`]).
+#[derive(Clone, Debug)]
+pub struct PriorFocus {
+    base: Pose,
+    /// The moving parameters the prior weighs: (index in a pose, in the prior).
+    dims: Vec<(usize, usize)>,
+    /// P·d₀ for the base's offset d₀ from the mean.
+    pull: [f64; PRIOR_DIMS],
+    /// d₀².
+    d2: f64,
+}
+
+/// The robust cost of a squared distance: `ν · ln(1 + d²/ν)`.
+fn robust(d2: f64) -> f64 {
+    NU * (d2 / NU).ln_1p()
 }
 
 /// A prior as stored (JSON).
@@ -167,7 +185,51 @@ impl PosePrior {
 
     /// The prior's cost of `pose` per unit of weight: `ν · ln(1 + d²/ν)`.
     pub fn cost(&self, pose: &Pose) -> f64 {
-        NU * (self.distance2(pose) / NU).ln_1p()
+        robust(self.distance2(pose))
+    }
+
+    /// Prepares [`PosePrior::focused_cost`] for poses that differ from `base` in
+    /// `params` alone (the search over one group of parameters).
+    pub fn focus(&self, base: &Pose, params: &[usize]) -> PriorFocus {
+        let x = pick(base);
+        let mut d = [0.0; PRIOR_DIMS];
+        for ((d, x), m) in d.iter_mut().zip(&x).zip(&self.mean) {
+            *d = x - m;
+        }
+        let mut pull = [0.0; PRIOR_DIMS];
+        for (g, row) in pull.iter_mut().zip(&self.precision) {
+            *g = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
+        }
+        let d2 = d.iter().zip(&pull).map(|(d, g)| d * g).sum();
+        let dims = params
+            .iter()
+            .filter_map(|&k| PRIOR_PARAMS.iter().position(|&q| q == k).map(|i| (k, i)))
+            .collect();
+        PriorFocus {
+            base: *base,
+            dims,
+            pull,
+            d2,
+        }
+    }
+
+    /// [`PosePrior::cost`] of `pose`, which differs from the focus's base in its
+    /// parameters alone: `d² = d₀² + 2δ·Pd₀ + δᵀPδ` over the few that move, so a
+    /// group's search pays for its own parameters, not for all 26.
+    pub fn focused_cost(&self, focus: &PriorFocus, pose: &Pose) -> f64 {
+        let mut d2 = focus.d2;
+        for &(k, i) in &focus.dims {
+            let di = pose[k] - focus.base[k];
+            if di == 0.0 {
+                continue;
+            }
+            let mut s = 2.0 * focus.pull[i];
+            for &(l, j) in &focus.dims {
+                s += self.precision[i][j] * (pose[l] - focus.base[l]);
+            }
+            d2 += di * s;
+        }
+        robust(d2.max(0.0))
     }
 
     /// Reads a prior file (as written by [`PosePrior::write`]).
@@ -351,6 +413,27 @@ mod tests {
         moved[ix::ROOT_TX] += 80.0;
         moved[ix::ROOT_RY] += 120.0;
         assert!((prior.cost(&moved) - base).abs() < 1e-9);
+    }
+
+    #[test]
+    fn the_focused_cost_is_the_cost_while_only_its_parameters_move() {
+        use crate::body::params::Group;
+        let prior = PosePrior::builtin();
+        let base = swinging()[23];
+        for group in Group::ALL {
+            let params: Vec<usize> = group.range().collect();
+            let focus = prior.focus(&base, &params);
+            assert!((prior.focused_cost(&focus, &base) - prior.cost(&base)).abs() < 1e-9);
+            let mut moved = base;
+            for (n, &k) in params.iter().enumerate() {
+                moved[k] += 7.0 - 3.0 * n as f64;
+            }
+            let (fast, full) = (prior.focused_cost(&focus, &moved), prior.cost(&moved));
+            assert!(
+                (fast - full).abs() < 1e-9 * full.max(1.0),
+                "{fast} against {full}"
+            );
+        }
     }
 
     #[test]
