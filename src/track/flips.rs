@@ -539,14 +539,20 @@ mod tests {
         assert!((a.joint(Joint::LeftFoot) - b.joint(Joint::LeftFoot)).norm() < 1e-9);
     }
 
+    /// A trunk flip's neck, before (`a`) and after (`b`): checks that it is seen
+    /// where it was; its depths from the spine's joint (towards the camera, +z).
+    fn neck_depths(a: &Posed, b: &Posed) -> (f64, f64) {
+        let neck = |p: &Posed| p.joint(Joint::Neck);
+        let px = pixels_apart(&neck(a), &neck(b));
+        assert!(px < 3.0, "the neck moved {px:.1} px in the image");
+        let spine = a.joint(Joint::Spine).z;
+        (neck(a).z - spine, neck(b).z - spine)
+    }
+
     #[test]
     fn a_trunk_bent_forwards_flips_to_one_bent_backwards_with_the_arms_carried() {
         let (a, b) = flipped("spine", -10.0, &[(ix::SPINE, 25.0)]);
-        let neck = |p: &Posed| p.joint(Joint::Neck);
-        let px = pixels_apart(&neck(&a), &neck(&b));
-        assert!(px < 3.0, "the neck moved {px:.1} px in the image");
-        let spine = a.joint(Joint::Spine).z;
-        let (before, after) = (neck(&a).z - spine, neck(&b).z - spine);
+        let (before, after) = neck_depths(&a, &b);
         assert!(
             before > 10.0 && after < -5.0,
             "depth {before:.1} -> {after:.1}"
@@ -565,11 +571,7 @@ mod tests {
             (ix::R_SHOULDER + 1, 10.0),
         ];
         let (a, b) = flipped("spine with the arms", -10.0, &set);
-        let neck = |p: &Posed| p.joint(Joint::Neck);
-        let px = pixels_apart(&neck(&a), &neck(&b));
-        assert!(px < 3.0, "the neck moved {px:.1} px in the image");
-        let spine = a.joint(Joint::Spine).z;
-        let (before, after) = (neck(&a).z - spine, neck(&b).z - spine);
+        let (before, after) = neck_depths(&a, &b);
         assert!(
             before < -10.0 && after > 10.0,
             "depth {before:.1} -> {after:.1}"
@@ -578,6 +580,7 @@ mod tests {
         // nearer (the "spine" flip keeps them on their side of the shoulders, and so
         // brings them nearer with them).
         let (_, kept) = flipped("spine", -10.0, &set);
+        let spine = a.joint(Joint::Spine).z;
         for hand in [Joint::LeftHand, Joint::RightHand] {
             let depth = |p: &Posed| p.joint(hand).z - spine;
             let (before, after, kept) = (depth(&a), depth(&b), depth(&kept));

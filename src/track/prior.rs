@@ -168,13 +168,18 @@ impl PosePrior {
         &self.sources
     }
 
+    /// `pose`'s weighed angles less the captured poses' mean.
+    fn offset(&self, pose: &Pose) -> [f64; PRIOR_DIMS] {
+        let mut d = pick(pose);
+        for (d, m) in d.iter_mut().zip(&self.mean) {
+            *d -= m;
+        }
+        d
+    }
+
     /// The squared Mahalanobis distance of `pose` from the captured poses' mean.
     pub fn distance2(&self, pose: &Pose) -> f64 {
-        let x = pick(pose);
-        let mut d = [0.0; PRIOR_DIMS];
-        for ((d, x), m) in d.iter_mut().zip(&x).zip(&self.mean) {
-            *d = x - m;
-        }
+        let d = self.offset(pose);
         let mut d2 = 0.0;
         for (di, row) in d.iter().zip(&self.precision) {
             let s: f64 = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
@@ -191,11 +196,7 @@ impl PosePrior {
     /// Prepares [`PosePrior::focused_cost`] for poses that differ from `base` in
     /// `params` alone (the search over one group of parameters).
     pub fn focus(&self, base: &Pose, params: &[usize]) -> PriorFocus {
-        let x = pick(base);
-        let mut d = [0.0; PRIOR_DIMS];
-        for ((d, x), m) in d.iter_mut().zip(&x).zip(&self.mean) {
-            *d = x - m;
-        }
+        let d = self.offset(base);
         let mut pull = [0.0; PRIOR_DIMS];
         for (g, row) in pull.iter_mut().zip(&self.precision) {
             *g = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
