@@ -85,6 +85,11 @@ pub struct PriorFocus {
     d2: f64,
 }
 
+/// The dot product of two offsets.
+fn dot(a: &[f64; PRIOR_DIMS], b: &[f64; PRIOR_DIMS]) -> f64 {
+    a.iter().zip(b).map(|(a, b)| a * b).sum()
+}
+
 /// The robust cost of a squared distance: `ν · ln(1 + d²/ν)`.
 fn robust(d2: f64) -> f64 {
     NU * (d2 / NU).ln_1p()
@@ -180,12 +185,16 @@ impl PosePrior {
     /// The squared Mahalanobis distance of `pose` from the captured poses' mean.
     pub fn distance2(&self, pose: &Pose) -> f64 {
         let d = self.offset(pose);
-        let mut d2 = 0.0;
-        for (di, row) in d.iter().zip(&self.precision) {
-            let s: f64 = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
-            d2 += di * s;
+        dot(&d, &self.pull(&d)).max(0.0)
+    }
+
+    /// P·d: the precision matrix times an offset from the mean.
+    fn pull(&self, d: &[f64; PRIOR_DIMS]) -> [f64; PRIOR_DIMS] {
+        let mut g = [0.0; PRIOR_DIMS];
+        for (g, row) in g.iter_mut().zip(&self.precision) {
+            *g = dot(row, d);
         }
-        d2.max(0.0)
+        g
     }
 
     /// The prior's cost of `pose` per unit of weight: `ν · ln(1 + d²/ν)`.
@@ -197,11 +206,8 @@ impl PosePrior {
     /// `params` alone (the search over one group of parameters).
     pub fn focus(&self, base: &Pose, params: &[usize]) -> PriorFocus {
         let d = self.offset(base);
-        let mut pull = [0.0; PRIOR_DIMS];
-        for (g, row) in pull.iter_mut().zip(&self.precision) {
-            *g = row.iter().zip(&d).map(|(p, dj)| p * dj).sum();
-        }
-        let d2 = d.iter().zip(&pull).map(|(d, g)| d * g).sum();
+        let pull = self.pull(&d);
+        let d2 = dot(&d, &pull);
         let dims = params
             .iter()
             .filter_map(|&k| PRIOR_PARAMS.iter().position(|&q| q == k).map(|i| (k, i)))
