@@ -74,6 +74,21 @@ const MAX_RESIZE: f64 = 1.25;
 /// Frames tracked from each initial candidate to choose between them.
 const HYPOTHESIS_FRAMES: usize = 15;
 
+/// Frames either side of the initial frame that measure the person's travel
+/// ([`ground_travel`]).
+const TRAVEL_FRAMES: usize = 30;
+
+/// A person whose feet move faster than this on the ground (cm/s) travels, and the
+/// front/back choice looks at which way ([`Tracker::choose_initial`]).
+const TRAVEL_SPEED: f64 = 40.0;
+
+/// A travelling person's candidate is taken for its direction when the cosine
+/// between its front and the travel is over this ...
+const TRAVEL_ALONG: f64 = 0.7;
+
+/// ... and over the cosine of the candidate the cost chose by this much.
+const TRAVEL_MARGIN: f64 = 0.3;
+
 /// Initial candidates whose summed costs over [`HYPOTHESIS_FRAMES`] lie within this
 /// fraction of each other are a tie ([`choose_hypothesis`]).
 const FACING_TIE: f64 = 0.02;
@@ -694,7 +709,10 @@ impl Tracker {
             let targets: Vec<Option<&Target>> = pending.iter().map(|p| p.target.as_ref()).collect();
             let (totals, evals) = self.probe_candidates(&body, &candidates, &targets, 0, init)?;
             timing.evals += evals;
-            let chosen = choose_hypothesis(&totals, &self.camera);
+            let paper = init_target.paper();
+            let paper = paper.as_ref().unwrap_or(init_target);
+            let (chosen, evals) = self.choose_initial(&body, paper, &totals, &targets, init);
+            timing.evals += evals;
             match totals.iter().find(|(_, p)| *p != chosen) {
                 Some((_, other)) if self.opts.other_candidate => *other,
                 _ => chosen,
@@ -986,7 +1004,10 @@ impl Tracker {
                 targets[..=init].iter().map(Option::as_deref).collect();
             let (totals, e) = self.probe_candidates(body, &candidates, &refs, from, init)?;
             evals += e;
-            choose_hypothesis(&totals, &self.camera)
+            let paper = paper.as_ref().unwrap_or(init_target);
+            let (chosen, e) = self.choose_initial(body, paper, &totals, &refs, init);
+            evals += e;
+            chosen
         };
         let (mut search, init_frame) = self.start_on(body, from + init, init_target, init_pose);
         let (ground, init_pose) = (search.ground, init_frame.pose);
@@ -1073,6 +1094,58 @@ impl Tracker {
             totals.push((total, *c));
         }
         Ok((totals, evals))
+    }
+
+    /// The initial pose among the probed candidates (each with its summed cost over
+    /// the probe frames) and the evaluations spent choosing: [`choose_hypothesis`],
+    /// unless the person travels. People walk and run forwards, so a travelling
+    /// person's candidate is the one whose front points along the travel, the best
+    /// fit's depth mirror ([`super::flips::depth_mirror`], which one view cannot tell
+    /// from it, and which on a view from 60° off the front is only 60° away in
+    /// heading) among them, when it does so clearly better than the choice by cost
+    /// ([`TRAVEL_ALONG`], [`TRAVEL_MARGIN`]).
+    fn choose_initial(
+        &self,
+        body: &Body,
+        init_target: &Target,
+        probes: &[(f64, Pose)],
+        targets: &[Option<&Target>],
+        init: usize,
+    ) -> (Pose, u64) {
+        let chosen = choose_hypothesis(probes, &self.camera);
+        let ground = sole_height(body, &body.posed(&chosen));
+        let travel = self.silhouette_travel(targets, init, ground);
+        let Some(travel) = travel.filter(|t| t.speed() >= TRAVEL_SPEED) else {
+            return (chosen, 0);
+        };
+        let mirror = super::flips::depth_mirror(&chosen);
+        let (mirror, _, evals) =
+            Search::initial(self, body).fit_wide_counted(init_target, mirror, 3);
+        let along = |p: &Pose| travel.along(p[ix::ROOT_RY]);
+        let best = probes
+            .iter()
+            .map(|(_, p)| *p)
+            .chain([mirror])
+            .max_by(|a, b| along(a).total_cmp(&along(b)))
+            .unwrap_or(chosen);
+        let clearly = along(&best) > TRAVEL_ALONG && along(&best) - along(&chosen) > TRAVEL_MARGIN;
+        (if clearly { best } else { chosen }, evals)
+    }
+
+    /// The person's travel over up to [`TRAVEL_FRAMES`] frames either side of
+    /// `init`, the ground at height `ground` ([`ground_travel`]).
+    fn silhouette_travel(
+        &self,
+        targets: &[Option<&Target>],
+        init: usize,
+        ground: f64,
+    ) -> Option<Travel> {
+        let lo = init.saturating_sub(TRAVEL_FRAMES);
+        let hi = (init + TRAVEL_FRAMES + 1).min(targets.len());
+        let boxes: Vec<(usize, [u32; 4])> = (lo..hi)
+            .filter_map(|i| Some((i, mask_bbox(&targets[i]?.silhouette)?)))
+            .collect();
+        ground_travel(&self.camera, &boxes, ground, self.opts.fps)
     }
 
     /// Initialisation (method.md §5, paper §5.1) on one frame: place the standard
@@ -1225,7 +1298,8 @@ impl Tracker {
 /// and without a lead-in, each clip tracked from both candidates) the cheapest
 /// candidate scores a mean PCK@0.1 of 0.753, a 1% tie 0.826 and a 2% tie 0.843; a
 /// 2% tie turned 8 choices, 6 of them gaining 0.15–0.63 of a clip's PCK and one (a
-/// person facing away) losing 0.28. A keyframe on the initial frame overrides it.
+/// person facing away) losing 0.28. A keyframe on the initial frame overrides it,
+/// and so does a travelling person's direction ([`Tracker::choose_initial`]).
 fn choose_hypothesis(candidates: &[(f64, Pose)], camera: &Camera) -> Pose {
     let cheapest = candidates
         .iter()
@@ -1241,6 +1315,77 @@ fn choose_hypothesis(candidates: &[(f64, Pose)], camera: &Camera) -> Pose {
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .unwrap_or(cheapest)
         .1
+}
+
+/// A person's move on the ground: x and z in the world (cm) over `secs` seconds.
+#[derive(Clone, Copy, Debug, PartialEq)]
+struct Travel {
+    dx: f64,
+    dz: f64,
+    secs: f64,
+}
+
+impl Travel {
+    /// Speed on the ground, cm/s.
+    fn speed(&self) -> f64 {
+        self.dx.hypot(self.dz) / self.secs.max(1e-9)
+    }
+
+    /// The cosine between the travel and the front of a body at `heading`
+    /// (degrees; +Z at rest, as [`faces_camera`] has it).
+    fn along(&self, heading: f64) -> f64 {
+        let h = heading.to_radians();
+        (h.sin() * self.dx + h.cos() * self.dz) / self.dx.hypot(self.dz).max(1e-9)
+    }
+}
+
+/// Where a person goes on the ground (the world's plane y = `ground`), from the
+/// bounding boxes of their silhouettes (frame, box): the box's lowest row is where
+/// a foot stands (one is down most of the time while walking or running), so the
+/// ray through its middle meets the ground where the person is. A straight line
+/// fitted to those points over the frames by least squares gives the move. None
+/// from fewer than five such points (boxes that reach no lower than the horizon
+/// meet no ground).
+fn ground_travel(
+    camera: &Camera,
+    boxes: &[(usize, [u32; 4])],
+    ground: f64,
+    fps: f64,
+) -> Option<Travel> {
+    let to_world = camera.world_to_camera.inverse();
+    let eye = to_world * nalgebra::Point3::origin();
+    let mut pts: Vec<[f64; 3]> = Vec::with_capacity(boxes.len());
+    for &(i, b) in boxes {
+        let (u, v) = ((b[0] + b[2] + 1) as f64 / 2.0, (b[3] + 1) as f64);
+        let ray = to_world
+            * nalgebra::Vector3::new(
+                (u - camera.cx) / camera.fx,
+                (camera.cy - v) / camera.fy,
+                -1.0,
+            );
+        let t = (ground - eye.y) / ray.y;
+        if t.is_finite() && t > 0.0 {
+            let p = eye + t * ray;
+            pts.push([i as f64, p.x, p.z]);
+        }
+    }
+    if pts.len() < 5 {
+        return None;
+    }
+    let n = pts.len() as f64;
+    let mean = |k: usize| pts.iter().map(|p| p[k]).sum::<f64>() / n;
+    let mt = mean(0);
+    let stt: f64 = pts.iter().map(|p| (p[0] - mt).powi(2)).sum();
+    let slope = |k: usize| {
+        let m = mean(k);
+        pts.iter().map(|p| (p[0] - mt) * (p[k] - m)).sum::<f64>() / stt
+    };
+    let span = pts[pts.len() - 1][0] - pts[0][0];
+    Some(Travel {
+        dx: slope(1) * span,
+        dz: slope(2) * span,
+        secs: span / fps.max(1.0),
+    })
 }
 
 /// Whether the body's front (+Z at rest, turned by the heading) points towards the
@@ -2512,6 +2657,72 @@ mod tests {
         ));
         assert!(faces_camera(&facing(180.0), &behind));
         assert!(!faces_camera(&facing(0.0), &behind));
+    }
+
+    /// The boxes of a person whose feet go from `a` to `b` (world, on the ground)
+    /// over `frames` frames, seen by `cam`.
+    fn walking_boxes(
+        cam: &Camera,
+        a: [f64; 3],
+        b: [f64; 3],
+        frames: usize,
+    ) -> Vec<(usize, [u32; 4])> {
+        (0..frames)
+            .map(|i| {
+                let t = i as f64 / (frames - 1) as f64;
+                let p = nalgebra::Point3::from(
+                    nalgebra::Vector3::from(a) * (1.0 - t) + nalgebra::Vector3::from(b) * t,
+                );
+                let [u, v] = cam.project(&p).expect("in front");
+                let (u, v) = (u.round() as u32, v.round() as u32);
+                (i + 7, [u - 9, v.saturating_sub(120), u + 8, v - 1])
+            })
+            .collect()
+    }
+
+    #[test]
+    fn the_feet_on_the_ground_tell_where_a_person_goes() {
+        let cam = Camera::new(320, 240, 55.0);
+        // Towards the camera and to its left, 2 m in 2 s (fps 30, 60 frames).
+        let (a, b) = ([60.0, -150.0, -700.0], [-60.0, -150.0, -541.0]);
+        let boxes = walking_boxes(&cam, a, b, 61);
+        let got = ground_travel(&cam, &boxes, -150.0, 30.0).expect("a travel");
+        let want = (b[0] - a[0]).atan2(b[2] - a[2]);
+        let err = (got.dx.atan2(got.dz) - want).to_degrees();
+        assert!(err.abs() < 5.0, "{got:?}: {err}° off");
+        assert!((got.speed() - 100.0).abs() < 10.0, "{got:?}");
+        assert_eq!(got.secs, 2.0);
+        // The front that points that way, and its depth mirror's, which does not.
+        let heading = want.to_degrees();
+        assert!(got.along(heading) > 0.99);
+        assert!(got.along(heading + 180.0) < -0.99);
+        assert!(got.along(heading + 90.0).abs() < 0.1);
+        // The same from a camera turned round behind the person's far side.
+        let behind = cam.with_pose(nalgebra::IsometryMatrix3::from_parts(
+            nalgebra::Translation3::new(0.0, 0.0, -1200.0),
+            nalgebra::Rotation3::from_axis_angle(
+                &nalgebra::Vector3::y_axis(),
+                std::f64::consts::PI,
+            ),
+        ));
+        let boxes = walking_boxes(&behind, a, b, 61);
+        let got = ground_travel(&behind, &boxes, -150.0, 30.0).expect("a travel");
+        let err = (got.dx.atan2(got.dz) - want).to_degrees();
+        assert!(err.abs() < 5.0, "{got:?}: {err}° off");
+    }
+
+    #[test]
+    fn no_travel_without_feet_below_the_horizon_or_frames_enough() {
+        let cam = Camera::new(320, 240, 55.0);
+        // Above the horizon (the middle row): no ray meets the ground.
+        let high: Vec<(usize, [u32; 4])> = (0..20).map(|i| (i, [100, 10, 120, 100])).collect();
+        assert_eq!(ground_travel(&cam, &high, -150.0, 30.0), None);
+        let boxes = walking_boxes(&cam, [0.0, -150.0, -600.0], [0.0, -150.0, -500.0], 4);
+        assert_eq!(ground_travel(&cam, &boxes, -150.0, 30.0), None);
+        // Standing still: no speed.
+        let still = walking_boxes(&cam, [0.0, -150.0, -600.0], [0.0, -150.0, -600.0], 30);
+        let got = ground_travel(&cam, &still, -150.0, 30.0).expect("points");
+        assert!(got.speed() < TRAVEL_SPEED, "{got:?}");
     }
 
     #[test]
