@@ -1099,11 +1099,12 @@ impl Tracker {
     /// The initial pose among the probed candidates (each with its summed cost over
     /// the probe frames) and the evaluations spent choosing: [`choose_hypothesis`],
     /// unless the person travels. People walk and run forwards, so a travelling
-    /// person's candidate is the one whose front points along the travel, the best
-    /// fit's depth mirror ([`super::flips::depth_mirror`], which one view cannot tell
-    /// from it, and which on a view from 60° off the front is only 60° away in
-    /// heading) among them, when it does so clearly better than the choice by cost
-    /// ([`TRAVEL_ALONG`], [`TRAVEL_MARGIN`]).
+    /// person's candidate is the one whose front points along the travel, when it
+    /// does so clearly better than the one [`choose_hypothesis`] chose
+    /// ([`TRAVEL_ALONG`], [`TRAVEL_MARGIN`]); that one's depth mirror
+    /// ([`super::flips::depth_mirror`], which one view cannot tell from it, and which
+    /// on a view from 60° off the front is only 60° away in heading), refined, is
+    /// among the candidates.
     fn choose_initial(
         &self,
         body: &Body,
