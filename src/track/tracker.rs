@@ -709,9 +709,7 @@ impl Tracker {
             let targets: Vec<Option<&Target>> = pending.iter().map(|p| p.target.as_ref()).collect();
             let (totals, evals) = self.probe_candidates(&body, &candidates, &targets, 0, init)?;
             timing.evals += evals;
-            let paper = init_target.paper();
-            let paper = paper.as_ref().unwrap_or(init_target);
-            let (chosen, evals) = self.choose_initial(&body, paper, &totals, &targets, init);
+            let (chosen, evals) = self.choose_initial(&body, init_target, &totals, &targets, init);
             timing.evals += evals;
             match totals.iter().find(|(_, p)| *p != chosen) {
                 Some((_, other)) if self.opts.other_candidate => *other,
@@ -1004,8 +1002,7 @@ impl Tracker {
                 targets[..=init].iter().map(Option::as_deref).collect();
             let (totals, e) = self.probe_candidates(body, &candidates, &refs, from, init)?;
             evals += e;
-            let paper = paper.as_ref().unwrap_or(init_target);
-            let (chosen, e) = self.choose_initial(body, paper, &totals, &refs, init);
+            let (chosen, e) = self.choose_initial(body, init_target, &totals, &refs, init);
             evals += e;
             chosen
         };
@@ -1119,9 +1116,14 @@ impl Tracker {
         let Some(travel) = travel.filter(|t| t.speed() >= TRAVEL_SPEED) else {
             return (chosen, 0);
         };
+        // Refined under the paper's objective, as the other candidates were.
+        let paper = init_target.paper();
         let mirror = super::flips::depth_mirror(&chosen);
-        let (mirror, _, evals) =
-            Search::initial(self, body).fit_wide_counted(init_target, mirror, 3);
+        let (mirror, _, evals) = Search::initial(self, body).fit_wide_counted(
+            paper.as_ref().unwrap_or(init_target),
+            mirror,
+            3,
+        );
         let along = |p: &Pose| travel.along(p[ix::ROOT_RY]);
         let best = probes
             .iter()
