@@ -8,7 +8,7 @@
 //! with u right and v down; pixel (i, j) covers [i, i+1) × [j, j+1), so its centre is
 //! (i + 0.5, j + 0.5).
 
-use nalgebra::{IsometryMatrix3, Point3};
+use nalgebra::{IsometryMatrix3, Point3, Vector3};
 
 /// Nearest depth (cm) at which geometry is projected.
 pub const NEAR: f64 = 1.0;
@@ -90,6 +90,19 @@ impl Camera {
     pub fn project(&self, p: &Point3<f64>) -> Option<[f64; 2]> {
         self.project_camera(&self.to_camera(p))
     }
+
+    /// The camera's centre in the world.
+    pub fn eye(&self) -> Point3<f64> {
+        self.world_to_camera.inverse() * Point3::origin()
+    }
+
+    /// The world direction, from [`Camera::eye`], of the line of sight through the
+    /// pixel position (u, v): the points [`Camera::project`] sends there (scaled
+    /// to depth 1 in front of the camera).
+    pub fn ray(&self, u: f64, v: f64) -> Vector3<f64> {
+        let c = Vector3::new((u - self.cx) / self.fx, (self.cy - v) / self.fy, -1.0);
+        self.world_to_camera.inverse() * c
+    }
 }
 
 #[cfg(test)]
@@ -115,5 +128,20 @@ mod tests {
             cam.to_contract(&Point3::new(1.0, 2.0, -3.0)),
             [1.0, 2.0, 3.0]
         );
+    }
+
+    #[test]
+    fn a_pixels_ray_from_the_eye_meets_the_points_seen_there() {
+        let cam = Camera::new(320, 240, 55.0).with_pose(IsometryMatrix3::from_parts(
+            nalgebra::Translation3::new(30.0, -80.0, -500.0),
+            nalgebra::Rotation3::from_axis_angle(&Vector3::y_axis(), 2.0),
+        ));
+        let eye = cam.eye();
+        assert!(cam.to_camera(&eye).coords.norm() < 1e-9, "{eye:?}");
+        let p = Point3::new(-40.0, 25.0, 130.0);
+        let [u, v] = cam.project(&p).expect("in front");
+        let ray = cam.ray(u, v);
+        let depth = -cam.to_camera(&p).z;
+        assert!((eye + depth * ray - p).norm() < 1e-9, "{ray:?}");
     }
 }

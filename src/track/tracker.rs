@@ -1355,17 +1355,10 @@ fn ground_travel(
     ground: f64,
     fps: f64,
 ) -> Option<Travel> {
-    let to_world = camera.world_to_camera.inverse();
-    let eye = to_world * nalgebra::Point3::origin();
+    let eye = camera.eye();
     let mut pts: Vec<[f64; 3]> = Vec::with_capacity(boxes.len());
     for &(i, b) in boxes {
-        let (u, v) = ((b[0] + b[2] + 1) as f64 / 2.0, (b[3] + 1) as f64);
-        let ray = to_world
-            * nalgebra::Vector3::new(
-                (u - camera.cx) / camera.fx,
-                (camera.cy - v) / camera.fy,
-                -1.0,
-            );
+        let ray = camera.ray((b[0] + b[2] + 1) as f64 / 2.0, (b[3] + 1) as f64);
         let t = (ground - eye.y) / ray.y;
         if t.is_finite() && t > 0.0 {
             let p = eye + t * ray;
@@ -1395,7 +1388,7 @@ fn ground_travel(
 /// camera rather than away from it (on the ground plane).
 fn faces_camera(pose: &Pose, camera: &Camera) -> bool {
     let h = pose[ix::ROOT_RY].to_radians();
-    let eye = camera.world_to_camera.inverse() * nalgebra::Point3::origin();
+    let eye = camera.eye();
     let to_camera = (eye.x - pose[ix::ROOT_TX], eye.z - pose[ix::ROOT_TZ]);
     h.sin() * to_camera.0 + h.cos() * to_camera.1 > 0.0
 }
