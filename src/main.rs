@@ -386,6 +386,12 @@ struct BenchArgs {
     /// flattering) or none.
     #[arg(long, default_value = "held-out")]
     prior: String,
+    /// The shape the initialisation starts from: held-out (for each capture, the
+    /// typical performer of the captures from other sources in the folder),
+    /// typical (the tracker's default, measured from these captures: flattering)
+    /// or standard (every shape value 1).
+    #[arg(long, default_value = "held-out")]
+    start_shape: String,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -730,6 +736,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
             "none" => bench::PriorChoice::None,
             other => anyhow::bail!("--prior {other}: expected held-out, builtin or none"),
         },
+        start_shape: match a.start_shape.as_str() {
+            "held-out" => bench::StartShape::HeldOut,
+            "typical" => bench::StartShape::Typical,
+            "standard" => bench::StartShape::Standard,
+            other => {
+                anyhow::bail!("--start-shape {other}: expected held-out, typical or standard")
+            }
+        },
         ..BenchOptions::default()
     };
     opts.track.restarts = a.restarts;
@@ -927,7 +941,7 @@ fn prior_command(a: PriorArgs) -> Result<()> {
     let captures = captures_in(&a.mocap)?;
     let prior = PosePrior::learn(&captures)?;
     prior.write(&a.out)?;
-    let poses: usize = captures.iter().map(|(_, p)| p.len()).sum();
+    let poses: usize = captures.iter().map(|c| c.poses.len()).sum();
     println!(
         "{}: a pose prior from {} captures ({poses} poses at 30 frames/s)",
         a.out.display(),

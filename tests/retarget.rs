@@ -2,10 +2,12 @@
 
 use std::path::Path;
 
+use monocap::body::params::{SHAPE, TYPICAL_SHAPE};
 use monocap::motion::bvh::Bvh;
 use monocap::motion::retarget::{
     detect_unit_scale, fit_shape, target_joints, JointMap, Retargeter,
 };
+use monocap::track::prior::{captures_in, typical_shape, Capture};
 use nalgebra::IsometryMatrix3;
 
 const MOCAP: &str = "../shared/data/mocap";
@@ -113,4 +115,26 @@ fn mixamo_names_map_onto_the_same_joints_as_cmu_names() {
     let left_arm = monocap::body::Joint::LeftArm.index();
     assert_eq!(name(a.source[left_arm]), "LeftShoulder");
     assert_eq!(name(b.source[left_arm]), "LeftShoulder");
+}
+
+/// [`TYPICAL_SHAPE`] is what [`typical_shape`] measures from the real captures
+/// (the constant is rounded to 0.001).
+#[test]
+fn the_typical_shape_is_measured_from_the_captures() {
+    let dir = Path::new(MOCAP);
+    if !dir.is_dir() {
+        println!("skipped: {MOCAP} is absent (a fresh clone has no ../shared)");
+        return;
+    }
+    let captures = captures_in(dir).expect("the captures retarget");
+    let all: Vec<&Capture> = captures.iter().collect();
+    let shape = typical_shape(&all).expect("captures");
+    println!("typical shape: {shape:.3?}");
+    for (k, (got, want)) in shape.iter().zip(TYPICAL_SHAPE).enumerate() {
+        assert!(
+            (got - want).abs() <= 0.0005 + 1e-9,
+            "{}: measured {got:.3}, TYPICAL_SHAPE has {want}",
+            SHAPE[k].name
+        );
+    }
 }

@@ -261,6 +261,19 @@ pub mod sx {
 /// The standard body: every factor 1.
 pub const STANDARD_SHAPE: ShapeValues = [1.0; SHAPE_COUNT];
 
+/// The typical performer of the motion captures in `../shared/data/mocap` (Bandai
+/// Namco and CMU), as `monocap synth` retargets them: for each source, the median
+/// of each value over its captures, then the mean of the two sources
+/// ([`crate::track::prior::typical_shape`]). The standard body, drawn from
+/// anthropometric tables, has a longer trunk between the joint centres (hips to
+/// neck 49 cm, the performers about 38), a wider pelvis and chest and longer upper
+/// arms. The initialisation starts from this shape
+/// ([`crate::track::TrackOptions::start_shape`]).
+#[rustfmt::skip]
+pub const TYPICAL_SHAPE: ShapeValues = [
+    1.0, 0.767, 0.775, 1.0, 0.741, 0.843, 0.825, 1.0, 0.952, 0.978, 1.0, 0.839,
+];
+
 /// The rest pose standing at the origin with its feet on the ground (y = 0).
 pub fn rest_pose() -> Pose {
     let mut pose = [0.0; MOTION_COUNT];

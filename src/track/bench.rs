@@ -25,10 +25,12 @@ use image::RgbImage;
 
 use super::metrics::{self, Accumulator};
 use super::objective::{Evaluator, Target};
-use super::prior::{captures_in, PosePrior};
+use super::prior::{captures_in, typical_shape, Capture, PosePrior};
 use super::simplex::{minimize, SimplexOptions};
 use super::tracker::{FrameInput, Track, TrackOptions, Tracker};
-use crate::body::params::{ix, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE_COUNT};
+use crate::body::params::{
+    ix, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE_COUNT, STANDARD_SHAPE, TYPICAL_SHAPE,
+};
 use crate::body::skeleton::Joint;
 use crate::body::{Body, Camera, Mask};
 use crate::clip::write::Frame;
@@ -89,7 +91,25 @@ pub struct BenchOptions {
     pub basin_probe: usize,
     /// Which pose prior the tracker weighs in ([`PriorChoice`]).
     pub prior: PriorChoice,
+    /// Which shape the initialisation starts from ([`StartShape`]).
+    pub start_shape: StartShape,
     pub track: TrackOptions,
+}
+
+/// The shape the initialisation starts from in a benchmark run
+/// ([`TrackOptions::start_shape`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum StartShape {
+    /// For each capture, the typical performer of the captures from other sources
+    /// in the folder ([`typical_shape`], [`super::prior::Capture::source`]; the
+    /// default): no clip starts from its own performer's proportions. A folder of
+    /// one source has none: its clips start from [`TYPICAL_SHAPE`].
+    HeldOut,
+    /// [`TYPICAL_SHAPE`], the tracker's default, which was measured from the
+    /// benchmark's own captures (flattering: for comparison only).
+    Typical,
+    /// The standard body (every value 1).
+    Standard,
 }
 
 /// The pose prior of a benchmark run ([`super::prior`]).
@@ -125,6 +145,7 @@ impl Default for BenchOptions {
             seed: SynthOptions::default().seed,
             basin_probe: 0,
             prior: PriorChoice::HeldOut,
+            start_shape: StartShape::HeldOut,
             track: TrackOptions::default(),
         }
     }
@@ -267,22 +288,35 @@ pub fn run(opts: &BenchOptions, mut each: impl FnMut(&ClipReport)) -> Result<Vec
         "no BVH files in {}",
         opts.mocap_dir.display()
     );
-    // The held-out priors learn from every capture in the folder, filtered or not
-    // (none are learned when the prior weighs nothing).
-    let captures = match opts.prior {
-        PriorChoice::HeldOut if opts.track.weights.prior > 0.0 => captures_in(&opts.mocap_dir)?,
-        PriorChoice::HeldOut | PriorChoice::Builtin | PriorChoice::None => Vec::new(),
+    // The held-out priors and start shapes learn from every capture in the folder,
+    // filtered or not (no prior is learned when the prior weighs nothing).
+    let held_prior = opts.prior == PriorChoice::HeldOut && opts.track.weights.prior > 0.0;
+    let captures = match held_prior || opts.start_shape == StartShape::HeldOut {
+        true => captures_in(&opts.mocap_dir)?,
+        false => Vec::new(),
     };
     let mut out = Vec::new();
     for file in &files {
         let bvh = Bvh::read(file).with_context(|| format!("reading {}", file.display()))?;
         let name = file.file_name().unwrap_or_default().to_string_lossy();
         let mut opts = opts.clone();
+        let own = captures.iter().find(|c| c.name == name).map(|c| c.source());
+        opts.track.start_shape = match opts.start_shape {
+            StartShape::HeldOut => {
+                let others: Vec<&Capture> = captures
+                    .iter()
+                    .filter(|c| Some(c.source()) != own)
+                    .collect();
+                typical_shape(&others).unwrap_or(TYPICAL_SHAPE)
+            }
+            StartShape::Typical => TYPICAL_SHAPE,
+            StartShape::Standard => STANDARD_SHAPE,
+        };
         opts.track.pose_prior = match opts.prior {
             PriorChoice::HeldOut => {
-                let others: Vec<(String, Vec<Pose>)> = captures
+                let others: Vec<Capture> = captures
                     .iter()
-                    .filter(|(n, _)| *n != name)
+                    .filter(|c| c.name != name)
                     .cloned()
                     .collect();
                 match others.is_empty() {

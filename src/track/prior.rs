@@ -17,6 +17,9 @@
 //! which is weighed in by default (`--w-prior 20`; 0 for no prior). The built-in
 //! prior (`pose_prior.json` next to this file) was learned from the captures in
 //! `../shared/data/mocap` (README, "The pose prior").
+//!
+//! The same captures give the shape the initialisation starts from
+//! ([`typical_shape`], [`crate::body::params::TYPICAL_SHAPE`]).
 
 use std::path::Path;
 use std::sync::{Arc, OnceLock};
@@ -26,7 +29,7 @@ use nalgebra::{DMatrix, DVector};
 use serde::{Deserialize, Serialize};
 
 use super::flips::exchange_sides;
-use crate::body::params::{ix, Pose, MOTION, MOTION_COUNT};
+use crate::body::params::{ix, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE_COUNT};
 use crate::motion::bvh::Bvh;
 use crate::synth::{synthesize_with, Style, SynthOptions};
 
@@ -107,12 +110,11 @@ struct PriorFile {
 }
 
 impl PosePrior {
-    /// Learns the prior from captures (each a list of poses, and its name): at most
-    /// [`POSES_PER_CAPTURE`] poses of each, evenly spread, and every pose also
-    /// mirrored.
-    pub fn learn(captures: &[(String, Vec<Pose>)]) -> Result<PosePrior> {
+    /// Learns the prior from captures' poses: at most [`POSES_PER_CAPTURE`] poses of
+    /// each, evenly spread, and every pose also mirrored.
+    pub fn learn(captures: &[Capture]) -> Result<PosePrior> {
         let mut samples: Vec<[f64; PRIOR_DIMS]> = Vec::new();
-        for (_, poses) in captures {
+        for Capture { poses, .. } in captures {
             let step = poses.len().div_ceil(POSES_PER_CAPTURE).max(1);
             for pose in poses.iter().step_by(step) {
                 samples.push(pick(pose));
@@ -152,7 +154,7 @@ impl PosePrior {
         Ok(PosePrior {
             mean,
             precision,
-            sources: captures.iter().map(|(name, _)| name.clone()).collect(),
+            sources: captures.iter().map(|c| c.name.clone()).collect(),
         })
     }
 
@@ -306,9 +308,28 @@ impl PosePrior {
     }
 }
 
-/// The retargeted model's poses of every frame of a capture (at 30 frames/s), as
-/// `monocap synth` poses it.
-pub fn capture_poses(bvh: &Bvh, name: &str) -> Result<Vec<Pose>> {
+/// A capture retargeted to the model, as `monocap synth` retargets it.
+#[derive(Clone, Debug)]
+pub struct Capture {
+    /// The BVH file's name.
+    pub name: String,
+    /// The model's pose on every frame (at 30 frames/s).
+    pub poses: Vec<Pose>,
+    /// The performer's shape.
+    pub shape: ShapeValues,
+}
+
+impl Capture {
+    /// The source the capture comes from: its name up to the first `_`
+    /// (`bandai_walk_normal_001.bvh` → `bandai`). Captures of one source are taken
+    /// to share performers.
+    pub fn source(&self) -> &str {
+        self.name.split('_').next().unwrap_or(&self.name)
+    }
+}
+
+/// [`Capture`] of one BVH file.
+pub fn capture(bvh: &Bvh, name: &str) -> Result<Capture> {
     // Rendered small and thrown away: only the poses are wanted.
     let opts = SynthOptions {
         width: 32,
@@ -317,18 +338,57 @@ pub fn capture_poses(bvh: &Bvh, name: &str) -> Result<Vec<Pose>> {
         ..SynthOptions::default()
     };
     let truth = synthesize_with(bvh, name, &opts, |_| Ok(()))?;
-    truth
+    let poses = truth
         .frames
         .iter()
         .map(|f| {
             Pose::try_from(f.params.as_slice())
                 .map_err(|_| anyhow::anyhow!("{name}: a pose of {} values", f.params.len()))
         })
-        .collect()
+        .collect::<Result<_>>()?;
+    let shape = ShapeValues::try_from(truth.shape.values.as_slice())
+        .map_err(|_| anyhow::anyhow!("{name}: a shape of {} values", truth.shape.values.len()))?;
+    Ok(Capture {
+        name: name.to_string(),
+        poses,
+        shape,
+    })
 }
 
-/// Each BVH file in `dir` (sorted by name) and its poses ([`capture_poses`]).
-pub fn captures_in(dir: &Path) -> Result<Vec<(String, Vec<Pose>)>> {
+/// The typical performer's shape among `captures`: for each source
+/// ([`Capture::source`]), the median of each shape value over its captures, then
+/// the mean over the sources, so that a source with many captures of the same
+/// performers counts once. `None` without captures.
+pub fn typical_shape(captures: &[&Capture]) -> Option<ShapeValues> {
+    let mut sources: Vec<&str> = captures.iter().map(|c| c.source()).collect();
+    sources.sort_unstable();
+    sources.dedup();
+    if sources.is_empty() {
+        return None;
+    }
+    let mut shape = [0.0; SHAPE_COUNT];
+    for source in &sources {
+        for (k, v) in shape.iter_mut().enumerate() {
+            let mut values: Vec<f64> = captures
+                .iter()
+                .filter(|c| c.source() == *source)
+                .map(|c| c.shape[k])
+                .collect();
+            values.sort_by(f64::total_cmp);
+            let n = values.len();
+            let median = if n % 2 == 1 {
+                values[n / 2]
+            } else {
+                (values[n / 2 - 1] + values[n / 2]) / 2.0
+            };
+            *v += median / sources.len() as f64;
+        }
+    }
+    Some(shape)
+}
+
+/// Each BVH file in `dir` (sorted by name), retargeted ([`capture`]).
+pub fn captures_in(dir: &Path) -> Result<Vec<Capture>> {
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .with_context(|| format!("reading {}", dir.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -345,8 +405,7 @@ pub fn captures_in(dir: &Path) -> Result<Vec<(String, Vec<Pose>)>> {
                 .to_string_lossy()
                 .to_string();
             let bvh = Bvh::read(f).with_context(|| format!("reading {}", f.display()))?;
-            let poses = capture_poses(&bvh, &name).with_context(|| format!("posing {name}"))?;
-            Ok((name, poses))
+            capture(&bvh, &name).with_context(|| format!("posing {name}"))
         })
         .collect()
 }
@@ -358,7 +417,7 @@ fn pick(pose: &Pose) -> [f64; PRIOR_DIMS] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::body::params::ix;
+    use crate::body::params::{ix, STANDARD_SHAPE};
 
     // Within a group the angles go x, z, y ([`MOTION`]).
     const SPINE_Y: usize = ix::SPINE + 2;
@@ -397,7 +456,7 @@ mod tests {
     }
 
     fn learned() -> PosePrior {
-        PosePrior::learn(&[("walk".to_string(), swinging())]).expect("learns")
+        PosePrior::learn(&[named("walk", swinging())]).expect("learns")
     }
 
     #[test]
@@ -512,7 +571,45 @@ mod tests {
             "positive definite",
         );
         assert!(PosePrior::from_json("[1, 2]").is_err());
-        assert!(PosePrior::learn(&[("one".to_string(), swinging()[..3].to_vec())]).is_err());
+        assert!(PosePrior::learn(&[named("one", swinging()[..3].to_vec())]).is_err());
+    }
+
+    /// A capture of the standard body.
+    fn named(name: &str, poses: Vec<Pose>) -> Capture {
+        Capture {
+            name: name.to_string(),
+            poses,
+            shape: STANDARD_SHAPE,
+        }
+    }
+
+    #[test]
+    fn the_typical_shape_counts_each_source_once() {
+        let with = |name: &str, torso: f64| Capture {
+            shape: {
+                let mut s = STANDARD_SHAPE;
+                s[1] = torso;
+                s
+            },
+            ..named(name, Vec::new())
+        };
+        let a = [
+            with("a_1.bvh", 0.7),
+            with("a_2.bvh", 0.8),
+            with("a_3.bvh", 1.3),
+        ];
+        let b = with("b.bvh", 1.2);
+        assert_eq!(b.source(), "b.bvh");
+        assert_eq!(a[0].source(), "a");
+        let all: Vec<&Capture> = a.iter().chain([&b]).collect();
+        let shape = typical_shape(&all).expect("captures");
+        // Source a's median 0.8, source b's 1.2: their mean, not the median of all.
+        assert!((shape[1] - 1.0).abs() < 1e-12, "{shape:?}");
+        assert!((shape[0] - 1.0).abs() < 1e-12);
+        let even = [with("c_1.bvh", 0.7), with("c_2.bvh", 0.9)];
+        let even: Vec<&Capture> = even.iter().collect();
+        assert!((typical_shape(&even).expect("captures")[1] - 0.8).abs() < 1e-12);
+        assert!(typical_shape(&[]).is_none());
     }
 
     #[test]

@@ -57,7 +57,7 @@ use super::refit::{Job, Window};
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
-    SHAPE_COUNT, STANDARD_SHAPE,
+    SHAPE_COUNT, TYPICAL_SHAPE,
 };
 use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
@@ -364,6 +364,11 @@ pub struct TrackOptions {
     pub initial: Option<(ShapeValues, Pose)>,
     /// The person's shape when it is known: the initialisation fits only the pose.
     pub known_shape: Option<ShapeValues>,
+    /// The shape the initialisation places and poses before it fits the shape, and
+    /// from which that fit starts ([`TYPICAL_SHAPE`] by default). One silhouette
+    /// says little about proportions: the fit mostly keeps the lengths it starts
+    /// from (README, "The typical performer").
+    pub start_shape: ShapeValues,
     /// The prior on the pose weighed into F by [`Weights::prior`] (the built-in one
     /// by default, [`PosePrior::builtin`]; None for none).
     pub pose_prior: Option<Arc<PosePrior>>,
@@ -405,6 +410,7 @@ impl Default for TrackOptions {
             features: FeatureOptions::default(),
             initial: None,
             known_shape: None,
+            start_shape: TYPICAL_SHAPE,
             pose_prior: Some(PosePrior::builtin()),
             stop: None,
             threads: 0,
@@ -1151,10 +1157,11 @@ impl Tracker {
         ground_travel(&self.camera, &boxes, ground, self.opts.fps)
     }
 
-    /// Initialisation (method.md §5, paper §5.1) on one frame: place the standard
-    /// body from the silhouette's bounding box, fit the pose from several headings
-    /// (the silhouette does not say which way the person faces) and keep the best,
-    /// then fit the 12 shape values with the root translation, and the pose again.
+    /// Initialisation (method.md §5, paper §5.1) on one frame: place the body of
+    /// [`TrackOptions::start_shape`] from the silhouette's bounding box, fit the pose
+    /// from several headings (the silhouette does not say which way the person
+    /// faces) and keep the best, then fit the 12 shape values with the root
+    /// translation, and the pose again.
     ///
     /// Returns the shape and the candidate poses, best first: the best fit and the
     /// best one facing more than 90° away from it, fitted with the best fit's shape
@@ -1174,10 +1181,10 @@ impl Tracker {
         let cam = &self.camera;
         let bbox = mask_bbox(&target.silhouette).expect("a person");
         let (_, rest) = standard_rest();
-        let standard = Body::new(&STANDARD_SHAPE);
-        let posed = standard.posed(&rest);
+        let start = Body::new(&self.opts.start_shape);
+        let posed = start.posed(&rest);
         let top = posed.tips[Tip::HeadTop as usize].y;
-        let sole = sole_height(&standard, &posed);
+        let sole = sole_height(&start, &posed);
         let tall = top - sole;
         let hip_up = rest[ix::ROOT_TY] - sole;
         let h_px = (bbox[3] - bbox[1] + 1) as f64;
@@ -1193,7 +1200,7 @@ impl Tracker {
 
         // Each heading's fit is independent of the others': side by side.
         let threads = self.threads();
-        let wide = || Search::initial(self, &standard);
+        let wide = || Search::initial(self, &start);
         let headings: Vec<i32> = (0..12).collect();
         let mut fits: Vec<(f64, Pose)> = par_map(&headings, threads, |&k| {
             let mut p = base;
@@ -1229,7 +1236,7 @@ impl Tracker {
 
         // A known shape: the pose alone is fitted again, with its body; otherwise
         // the shape with the root translation, alternating with the pose.
-        let mut shape = known.unwrap_or(STANDARD_SHAPE);
+        let mut shape = known.unwrap_or(self.opts.start_shape);
         let rounds = if known.is_some() {
             let body = Body::new(&shape);
             pose = Search::initial(self, &body).fit_wide(target, pose, 3).0;
