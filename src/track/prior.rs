@@ -330,7 +330,7 @@ impl Capture {
 
 /// [`Capture`] of one BVH file.
 pub fn capture(bvh: &Bvh, name: &str) -> Result<Capture> {
-    // Rendered small and thrown away: only the poses are wanted.
+    // Rendered small and thrown away: only the poses and the shape are wanted.
     let opts = SynthOptions {
         width: 32,
         height: 24,
