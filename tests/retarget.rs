@@ -12,13 +12,20 @@ use nalgebra::IsometryMatrix3;
 
 const MOCAP: &str = "../shared/data/mocap";
 
+/// The shared motion capture folder, or `None` (after saying why) when it is absent.
+fn mocap_dir() -> Option<&'static Path> {
+    let dir = Path::new(MOCAP);
+    if dir.is_dir() {
+        Some(dir)
+    } else {
+        println!("skipped: {MOCAP} is absent (a fresh clone has no ../shared)");
+        None
+    }
+}
+
 #[test]
 fn every_shared_mocap_file_retargets_within_a_few_centimetres() {
-    let dir = Path::new(MOCAP);
-    if !dir.is_dir() {
-        println!("skipped: {MOCAP} is absent (a fresh clone has no ../shared)");
-        return;
-    }
+    let Some(dir) = mocap_dir() else { return };
     let mut files: Vec<_> = std::fs::read_dir(dir)
         .unwrap()
         .flatten()
@@ -121,11 +128,7 @@ fn mixamo_names_map_onto_the_same_joints_as_cmu_names() {
 /// (the constant is rounded to 0.001).
 #[test]
 fn the_typical_shape_is_measured_from_the_captures() {
-    let dir = Path::new(MOCAP);
-    if !dir.is_dir() {
-        println!("skipped: {MOCAP} is absent (a fresh clone has no ../shared)");
-        return;
-    }
+    let Some(dir) = mocap_dir() else { return };
     let captures = captures_in(dir).expect("the captures retarget");
     let all: Vec<&Capture> = captures.iter().collect();
     let shape = typical_shape(&all).expect("captures");
