@@ -392,6 +392,10 @@ struct BenchArgs {
     /// or standard (every shape value 1).
     #[arg(long, default_value = "held-out")]
     start_shape: String,
+    /// Evaluations of the initialisation's joint fit (CMA-ES over the shape and the
+    /// pose at once, after the simplex has fitted them in turn); 0 for none.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().init_joint_evals)]
+    init_joint_evals: usize,
     #[command(flatten)]
     weights: WeightArgs,
 }
@@ -751,6 +755,14 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     opts.track.other_candidate = a.other_candidate;
     check_polish_evals(a.polish_evals)?;
     opts.track.polish_evals = a.polish_evals;
+    let most = monocap::track::tracker::MAX_INIT_JOINT_EVALS;
+    if a.init_joint_evals > most {
+        anyhow::bail!(
+            "--init-joint-evals {}: expected 0 to {most}",
+            a.init_joint_evals
+        );
+    }
+    opts.track.init_joint_evals = a.init_joint_evals;
     a.refit.apply(&mut opts.track)?;
     opts.track.threads = check_threads(a.threads)?;
     if a.polish_iou.is_nan() || a.polish_iou < 0.0 {
