@@ -381,7 +381,8 @@ pub struct TrackOptions {
     /// none): after the simplex has fitted the shape and the pose in turn, CMA-ES
     /// over the 12 shape values and the 30 pose values at once, under the
     /// tracking objective (no rewards, shares of pixels), the root moved with the
-    /// body's size so that its image keeps its place ([`Tracker::joint_fit`]).
+    /// body's size so that its image keeps its place, the pose prior weighed in
+    /// ([`Tracker::joint_fit`]).
     /// The fits one at a time stop where neither alone improves, a shape and
     /// pose that explain the silhouette worse than the person's own. Over the
     /// accuracy benchmark's six runs (seeds 1–3, with a person-free lead-in and
@@ -389,7 +390,9 @@ pub struct TrackOptions {
     /// (worse on two runs), model IoU 0.911 → 0.919 (higher on all six), lost
     /// frames 104 → 93, for 7% of the speed, with 4,000 evaluations; with 8,000
     /// (the default since 2026-12-02) PCK@0.1 0.920, PA-MPJPE 81.6 mm, IoU 0.927,
-    /// 55 lost (README, "The joint fit of shape and pose").
+    /// 55 lost (README, "The joint fit of shape and pose"); weighing the pose prior
+    /// too (since that day's second session) 0.928, 78.7 mm, 0.929, 45 lost (README,
+    /// "The pose prior in the joint fit").
     pub init_joint_evals: usize,
     /// The prior on the pose weighed into F by [`Weights::prior`] (the built-in one
     /// by default, [`PosePrior::builtin`]; None for none).
@@ -1334,7 +1337,9 @@ impl Tracker {
     /// The initialisation's joint fit ([`TrackOptions::init_joint_evals`]): CMA-ES
     /// over the 12 shape values and the 30 pose values at once, from `shape` and
     /// `pose`, under the tracking objective on `target` (the frame as tracked, with
-    /// shares of pixels). Each value moves in units of its length scale, with a
+    /// shares of pixels and the pose prior, [`TrackOptions::pose_prior`]; without
+    /// the prior the search bends the pose to suit a shape, README "The pose prior
+    /// in the joint fit"). Each value moves in units of its length scale, with a
     /// spread of [`INIT_JOINT_SPREAD`] of them; the shape within its plausible
     /// range. A larger or smaller body is moved away from or towards the camera in
     /// proportion, and up or down, so that its head top and soles keep their place
@@ -1366,9 +1371,12 @@ impl Tracker {
                 p[ix::ROOT_TY] - sole,
             )
         };
+        let prior = self.opts.pose_prior.as_deref();
         let base_body = Body::new(shape);
         let (tall0, hips0) = extent(&base_body, pose);
-        let base_f = Evaluator::new(&base_body, cam, target, weights, None).cost(pose);
+        let base_f = Evaluator::new(&base_body, cam, target, weights, None)
+            .with_prior(prior)
+            .cost(pose);
         if tall0.is_nan() || tall0 <= 0.0 {
             return None;
         }
@@ -1401,7 +1409,9 @@ impl Tracker {
             }
             let (s, p) = place(z.as_slice());
             let body = Body::new(&s);
-            let c = Evaluator::new(&body, cam, target, weights, None).cost(&p);
+            let c = Evaluator::new(&body, cam, target, weights, None)
+                .with_prior(prior)
+                .cost(&p);
             if c < found.as_ref().map_or(base_f, |f| f.0) {
                 found = Some((c, s, p));
             }
@@ -3038,8 +3048,10 @@ mod tests {
             .joint_fit(&target, &STANDARD_SHAPE, &pose)
             .expect("a cheaper shape and pose");
         let body = Body::new(&shape);
-        let mut before = Evaluator::new(&start, &cam, &target, weights, None);
-        let mut after = Evaluator::new(&body, &cam, &target, weights, None);
+        // Judged as the fit judges, with the pose prior.
+        let prior = tracker.opts.pose_prior.as_deref();
+        let mut before = Evaluator::new(&start, &cam, &target, weights, None).with_prior(prior);
+        let mut after = Evaluator::new(&body, &cam, &target, weights, None).with_prior(prior);
         assert!(after.cost(&found) < before.cost(&pose));
         let (iou0, iou1) = (before.iou(&pose), after.iou(&found));
         // (0.600 → 0.882 when written.)
