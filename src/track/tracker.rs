@@ -391,7 +391,7 @@ pub struct TrackOptions {
     /// frames 104 → 93, for 7% of the speed, with 4,000 evaluations; with 8,000
     /// (the default since 2026-12-02) PCK@0.1 0.920, PA-MPJPE 81.6 mm, IoU 0.927,
     /// 55 lost (README, "The joint fit of shape and pose"); weighing the pose prior
-    /// too (since that day's second session) 0.928, 78.7 mm, 0.929, 45 lost (README,
+    /// too (since that day's second session) 0.928, 78.7 mm, 0.930, 45 lost (README,
     /// "The pose prior in the joint fit").
     pub init_joint_evals: usize,
     /// The prior on the pose weighed into F by [`Weights::prior`] (the built-in one
