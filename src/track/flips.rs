@@ -17,7 +17,9 @@
 //! One more jump of the same kind is not a flip: a small bow and a nod of the head
 //! look alike from the front, and a tracker that put the bend into the neck stays
 //! there. [`nod_into_trunk`] straightens the neck and refits the trunk and arms so
-//! that the head and hands stay where they are.
+//! that the head and hands stay where they are. Nor is [`crouch`]: the hips
+//! lowered or raised with the feet kept where they are, a move the search's groups
+//! cannot make one at a time.
 
 use nalgebra::Point3;
 
@@ -277,11 +279,15 @@ pub fn nod_into_trunk(body: &Body, pose: &Pose) -> Option<Pose> {
 const LEG_GROUPS: [Group; 2] = [Group::LeftLeg, Group::RightLeg];
 const ARM_GROUPS: [Group; 2] = [Group::LeftArm, Group::RightArm];
 
+/// The groups a [`Jump::Crouch`] refits: the hips' place and turn, the trunk
+/// (a crouch bends it forwards) and the legs.
+const CROUCH_GROUPS: [Group; 4] = [Group::Global, Group::Torso, Group::LeftLeg, Group::RightLeg];
+
 /// The groups [`nod_into_trunk`] refits.
 const NOD_GROUPS: [Group; 3] = [Group::Torso, Group::LeftArm, Group::RightArm];
 
-/// A jump the tracker tries from each frame's result: a depth flip, or the head's
-/// nod moved into the trunk.
+/// A jump the tracker tries from each frame's result: a depth flip, the head's nod
+/// moved into the trunk, a swap of the legs or the arms, or a crouch.
 #[derive(Clone, Copy)]
 pub enum Jump {
     Flip(&'static Flip),
@@ -292,6 +298,54 @@ pub enum Jump {
     SwapLegs,
     /// The arms' angles exchanged (likewise).
     SwapArms,
+    /// The hips lowered (or raised, for a positive value) by this many cm, the
+    /// legs bent (or straightened) so that the feet stay where they are
+    /// ([`crouch`]).
+    Crouch(f64),
+}
+
+/// How far (cm) the [`Jump::Crouch`] jumps move the hips, down and up.
+pub const CROUCH_CM: f64 = 5.0;
+
+/// The hips moved up by `d` cm (down when `d` is negative) and the legs refitted by
+/// inverse kinematics so that the feet (ankles, toe bases and toe tips) stay where
+/// they are, the rest of the body carried along with the hips.
+///
+/// A person who squats or kneels lowers the hips and bends the knees together. The
+/// hierarchical search can do neither on its own: the global group cannot lower
+/// the hips while the legs are straight (the feet would sink below the ground,
+/// which costs +∞), and the legs' groups, bending with the hips held, lift the feet
+/// off the ground. It takes another way down instead, the whole body pitched
+/// forwards and turned: in CMU 131_01's crouch seen from −120° the tracked answers
+/// pitched it 27–36° with the heading over 70° off, while the bottom of the truth's
+/// basin cost about half as much (README "The crouch as a jump").
+pub fn crouch(body: &Body, pose: &Pose, d: f64) -> Pose {
+    let target = body.posed(pose).landmarks();
+    let mut base = *pose;
+    base[ix::ROOT_TY] += d;
+    let params: Vec<usize> = LEG_GROUPS.iter().flat_map(|g| g.range()).collect();
+    let mut weight = [0.0; LANDMARK_COUNT];
+    for j in [
+        Joint::LeftFoot,
+        Joint::LeftToeBase,
+        Joint::RightFoot,
+        Joint::RightToeBase,
+    ] {
+        weight[j as usize] = 1.0;
+    }
+    for t in [Tip::LeftToeTip, Tip::RightToeTip] {
+        weight[JOINT_COUNT + t as usize] = 1.0;
+    }
+    // Seeds: the legs as they are, and with the thighs raised (or lowered) a
+    // degree per centimetre, so that the knees bend forwards.
+    let x0: Vec<f64> = params.iter().map(|&k| base[k]).collect();
+    let mut thighs = x0.clone();
+    for (v, &k) in thighs.iter_mut().zip(&params) {
+        if k == ix::L_HIP || k == ix::R_HIP {
+            *v = (*v - d).clamp(MOTION[k].lo, MOTION[k].hi);
+        }
+    }
+    fit_landmarks_weighted(body, &base, &params, &target, &weight, [x0, thighs])
 }
 
 /// `pose` with the `n` angles from `left` and from `right` exchanged; None when
@@ -313,12 +367,13 @@ fn exchange(pose: &mut Pose, left: usize, right: usize, n: usize) {
 }
 
 impl Jump {
-    /// Every jump: the flips, then the nod.
+    /// Every jump: the flips, the nod, the swaps, then the crouch down and up.
     pub fn all() -> impl Iterator<Item = Jump> {
         FLIPS
             .iter()
             .map(Jump::Flip)
             .chain([Jump::NodIntoTrunk, Jump::SwapLegs, Jump::SwapArms])
+            .chain([Jump::Crouch(-CROUCH_CM), Jump::Crouch(CROUCH_CM)])
     }
 
     /// The parameters the jump changes (and the search then refines).
@@ -328,6 +383,7 @@ impl Jump {
             Jump::NodIntoTrunk => NOD_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::SwapLegs => LEG_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::SwapArms => ARM_GROUPS.iter().flat_map(|g| g.range()).collect(),
+            Jump::Crouch(_) => CROUCH_GROUPS.iter().flat_map(|g| g.range()).collect(),
         }
     }
 
@@ -343,6 +399,7 @@ impl Jump {
                 ix::R_SHOULDER,
                 ix::R_SHOULDER - ix::L_SHOULDER,
             ),
+            Jump::Crouch(d) => Some(crouch(body, pose, d)),
         }
     }
 }
@@ -397,6 +454,19 @@ fn fit_landmarks<const N: usize>(
     target: &[Point3<f64>; LANDMARK_COUNT],
     seeds: [Vec<f64>; N],
 ) -> Pose {
+    fit_landmarks_weighted(body, pose, params, target, &[1.0; LANDMARK_COUNT], seeds)
+}
+
+/// [`fit_landmarks`] with each landmark's squared miss weighed by `weight` (0: the
+/// landmark goes where it will).
+fn fit_landmarks_weighted<const N: usize>(
+    body: &Body,
+    pose: &Pose,
+    params: &[usize],
+    target: &[Point3<f64>; LANDMARK_COUNT],
+    weight: &[f64; LANDMARK_COUNT],
+    seeds: [Vec<f64>; N],
+) -> Pose {
     let steps: Vec<f64> = params.iter().map(|&k| 4.0 * MOTION[k].scale).collect();
     let lo: Vec<f64> = params.iter().map(|&k| MOTION[k].lo).collect();
     let hi: Vec<f64> = params.iter().map(|&k| MOTION[k].hi).collect();
@@ -417,7 +487,7 @@ fn fit_landmarks<const N: usize>(
             .pose_moved(&fit(x), &posed_base, &moved, &mut posed);
         let got = posed.landmarks();
         (0..LANDMARK_COUNT)
-            .map(|i| (got[i] - target[i]).norm_squared())
+            .map(|i| weight[i] * (got[i] - target[i]).norm_squared())
             .sum()
     };
     // Landmarks within a centimetre or so are enough: the search refines the
@@ -694,5 +764,54 @@ mod tests {
         );
         pose[ix::NECK] = 2.0;
         assert!(nod_into_trunk(&body, &pose).is_none());
+    }
+
+    #[test]
+    fn a_crouch_lowers_the_hips_and_bends_the_knees_with_the_feet_kept() {
+        let body = Body::new(&STANDARD_SHAPE);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TZ] = -300.0;
+        let feet = |p: &Pose| {
+            let l = body.posed(p).landmarks();
+            [
+                l[Joint::LeftFoot as usize],
+                l[Joint::RightToeBase as usize],
+                l[JOINT_COUNT + Tip::LeftToeTip as usize],
+                l[JOINT_COUNT + Tip::RightToeTip as usize],
+            ]
+        };
+        let moved = |a: &Pose, b: &Pose| {
+            feet(a)
+                .iter()
+                .zip(feet(b))
+                .map(|(x, y)| (x - y).norm())
+                .fold(0.0, f64::max)
+        };
+        let down = crouch(&body, &pose, -CROUCH_CM);
+        assert!((down[ix::ROOT_TY] - (pose[ix::ROOT_TY] - CROUCH_CM)).abs() < 1e-9);
+        let m = moved(&pose, &down);
+        assert!(m < 1.0, "the feet moved {m:.2} cm");
+        for knee in [ix::L_KNEE, ix::R_KNEE] {
+            let bent = down[knee] - pose[knee];
+            assert!(bent > 10.0, "a knee bent by {bent:.1}°");
+        }
+        // The arms and the trunk are carried along, untouched.
+        for k in ix::SPINE..ix::L_HIP {
+            assert_eq!(down[k], pose[k]);
+        }
+        // And up again: the knees straighten, the feet still kept. (Near straight,
+        // a knee barely changes the leg's length, so not to the very degree.)
+        let up = crouch(&body, &down, CROUCH_CM);
+        let m = moved(&pose, &up);
+        assert!(m < 1.0, "the feet moved {m:.2} cm");
+        for knee in [ix::L_KNEE, ix::R_KNEE] {
+            assert!(
+                up[knee] < pose[knee] + 0.5 * (down[knee] - pose[knee]),
+                "a knee at {:.1}° after rising, {:.1}° crouched, {:.1}° before",
+                up[knee],
+                down[knee],
+                pose[knee]
+            );
+        }
     }
 }

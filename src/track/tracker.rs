@@ -2459,7 +2459,7 @@ impl<'a> Search<'a> {
     }
 
     /// Tries every jump from `best` ([`Jump`]: the depth flips, the nod moved into
-    /// the trunk, the left/right swaps): each is refined by one pass of the search
+    /// the trunk, the left/right swaps, the crouch down and up): each is refined by one pass of the search
     /// over its parameters within the acceleration reach around it (half the budget
     /// of the frame's own search: it starts near its answer), and kept when it
     /// explains the frame better: F plus, on a colour frame, the inner outlines'
