@@ -2459,11 +2459,12 @@ impl<'a> Search<'a> {
     }
 
     /// Tries every jump from `best` ([`Jump`]: the depth flips, the nod moved into
-    /// the trunk, the left/right swaps, the crouch down and up): each is refined by one pass of the search
-    /// over its parameters within the acceleration reach around it (half the budget
-    /// of the frame's own search: it starts near its answer), and kept when it
-    /// explains the frame better: F plus, on a colour frame, the inner outlines'
-    /// cost ([`Search::outline_cost`]), which tells apart what the silhouette cannot.
+    /// the trunk, the left/right swaps, the crouch down and up): each is refined by
+    /// one pass of the search over its parameters within the acceleration reach
+    /// around it (half the budget of the frame's own search: it starts near its
+    /// answer), and kept when it explains the frame better: F plus, on a colour
+    /// frame, the inner outlines' cost ([`Search::outline_cost`]), which tells
+    /// apart what the silhouette cannot.
     fn try_jumps(&self, ev: &mut Evaluator, target: &Target, best: &mut Pose, best_f: &mut f64) {
         let opts = &self.tracker.opts;
         let weigh = self.weighs_outlines(target);
