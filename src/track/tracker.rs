@@ -290,6 +290,10 @@ pub struct TrackOptions {
     /// the evaluations where the fit is poor keeps most of the speed (polishing
     /// every frame cost a third of it).
     pub polish_iou: f64,
+    /// Whether each frame also tries the crouch down and up ([`Jump::Crouch`];
+    /// README "The crouch as a jump"). On by default; off reproduces the tracker
+    /// before it.
+    pub crouch_jumps: bool,
     /// The smoothed refit ([`super::refit`]): each frame searched again from the
     /// Gaussian average of its neighbours' poses, this many frames wide (its
     /// standard deviation; 0 for none), the answer replacing the first pass's.
@@ -420,6 +424,7 @@ impl Default for TrackOptions {
             evals_per_param: 25,
             polish_evals: POLISH_EVALS,
             polish_iou: POLISH_IOU,
+            crouch_jumps: true,
             recover_iou: RECOVER_IOU,
             recover_spike: RECOVER_SPIKE,
             refit_sigma: REFIT_SIGMA,
@@ -2473,6 +2478,9 @@ impl<'a> Search<'a> {
         for jump in Jump::all() {
             // A swap looks alike in the silhouette: only the outlines can tell.
             if matches!(jump, Jump::SwapLegs | Jump::SwapArms) && !weigh {
+                continue;
+            }
+            if matches!(jump, Jump::Crouch(_)) && !opts.crouch_jumps {
                 continue;
             }
             let params = jump.params();
