@@ -304,6 +304,16 @@ pub enum Jump {
     Crouch(f64),
 }
 
+/// The landmarks a [`crouch`] keeps in place: the ankles, toe bases and toe tips.
+const FEET: [usize; 6] = [
+    j(J::LeftFoot),
+    j(J::LeftToeBase),
+    t(Tip::LeftToeTip),
+    j(J::RightFoot),
+    j(J::RightToeBase),
+    t(Tip::RightToeTip),
+];
+
 /// How far (cm) the [`Jump::Crouch`] jumps move the hips, down and up.
 pub const CROUCH_CM: f64 = 5.0;
 
@@ -325,16 +335,8 @@ pub fn crouch(body: &Body, pose: &Pose, d: f64) -> Pose {
     base[ix::ROOT_TY] += d;
     let params: Vec<usize> = LEG_GROUPS.iter().flat_map(|g| g.range()).collect();
     let mut weight = [0.0; LANDMARK_COUNT];
-    for j in [
-        Joint::LeftFoot,
-        Joint::LeftToeBase,
-        Joint::RightFoot,
-        Joint::RightToeBase,
-    ] {
-        weight[j as usize] = 1.0;
-    }
-    for t in [Tip::LeftToeTip, Tip::RightToeTip] {
-        weight[JOINT_COUNT + t as usize] = 1.0;
+    for i in FEET {
+        weight[i] = 1.0;
     }
     // Seeds: the legs as they are, and with the thighs raised (or lowered) a
     // degree per centimetre, so that the knees bend forwards.
@@ -771,20 +773,10 @@ mod tests {
         let body = Body::new(&STANDARD_SHAPE);
         let mut pose = rest_pose();
         pose[ix::ROOT_TZ] = -300.0;
-        let feet = |p: &Pose| {
-            let l = body.posed(p).landmarks();
-            [
-                l[Joint::LeftFoot as usize],
-                l[Joint::RightToeBase as usize],
-                l[JOINT_COUNT + Tip::LeftToeTip as usize],
-                l[JOINT_COUNT + Tip::RightToeTip as usize],
-            ]
-        };
         let moved = |a: &Pose, b: &Pose| {
-            feet(a)
-                .iter()
-                .zip(feet(b))
-                .map(|(x, y)| (x - y).norm())
+            let (la, lb) = (body.posed(a).landmarks(), body.posed(b).landmarks());
+            FEET.iter()
+                .map(|&i| (la[i] - lb[i]).norm())
                 .fold(0.0, f64::max)
         };
         let down = crouch(&body, &pose, -CROUCH_CM);

@@ -2476,11 +2476,14 @@ impl<'a> Search<'a> {
         // The result's outline cost, computed when first needed.
         let mut best_o: Option<f64> = None;
         for jump in Jump::all() {
-            // A swap looks alike in the silhouette: only the outlines can tell.
-            if matches!(jump, Jump::SwapLegs | Jump::SwapArms) && !weigh {
-                continue;
-            }
-            if matches!(jump, Jump::Crouch(_)) && !opts.crouch_jumps {
+            // A swap looks alike in the silhouette: only the outlines can tell it
+            // apart. The crouch may be turned off.
+            let skip = match jump {
+                Jump::SwapLegs | Jump::SwapArms => !weigh,
+                Jump::Crouch(_) => !opts.crouch_jumps,
+                _ => false,
+            };
+            if skip {
                 continue;
             }
             let params = jump.params();
