@@ -290,7 +290,7 @@ pub struct TrackOptions {
     /// the evaluations where the fit is poor keeps most of the speed (polishing
     /// every frame cost a third of it).
     pub polish_iou: f64,
-    /// Whether each frame also tries the crouch down and up ([`Jump::Crouch`];
+    /// Whether each frame also tries the crouch down ([`Jump::Crouch`];
     /// README "The crouch as a jump"). On by default; off reproduces the tracker
     /// before it.
     pub crouch_jumps: bool,
@@ -2464,7 +2464,7 @@ impl<'a> Search<'a> {
     }
 
     /// Tries every jump from `best` ([`Jump`]: the depth flips, the nod moved into
-    /// the trunk, the left/right swaps, the crouch down and up): each is refined by
+    /// the trunk, the left/right swaps, the crouch down): each is refined by
     /// one pass of the search over its parameters within the acceleration reach
     /// around it (half the budget of the frame's own search: it starts near its
     /// answer), and kept when it explains the frame better: F plus, on a colour
