@@ -53,8 +53,7 @@ fn jump_name(j: Jump) -> String {
         Jump::NodIntoTrunk => "nod_into_trunk".into(),
         Jump::SwapLegs => "legs_swapped".into(),
         Jump::SwapArms => "arms_swapped".into(),
-        Jump::Crouch(d) if d < 0.0 => "crouched".into(),
-        Jump::Crouch(_) => "risen".into(),
+        Jump::Crouch => "crouched".into(),
     }
 }
 

@@ -746,9 +746,9 @@ fn the_joint_velocity_loses_a_walker_the_polish_or_the_root_velocity_keeps() {
         opts.track.recover_spike = 0.0;
         // The first pass alone: the later passes, started afresh, cover for it.
         opts.track.two_way = false;
-        // Without the crouch jumps, as when it was measured: with them (the default
-        // since 2026-12-02) 0.850, with the polish 0.897, with the root's velocity
-        // 0.917.
+        // Without the crouch jumps, as when it was measured: with the crouch down and
+        // up (2026-12-02, third session) 0.850, with the polish 0.897, with the
+        // root's velocity 0.917.
         opts.track.crouch_jumps = false;
         run_clip(&bvh, "walk", -120.0, 10, &opts).unwrap().acc.iou()
     };

@@ -298,10 +298,9 @@ pub enum Jump {
     SwapLegs,
     /// The arms' angles exchanged (likewise).
     SwapArms,
-    /// The hips lowered (or raised, for a positive value) by this many cm, the
-    /// legs bent (or straightened) so that the feet stay where they are
-    /// ([`crouch`]).
-    Crouch(f64),
+    /// The hips lowered by [`CROUCH_CM`], the legs bent so that the feet stay
+    /// where they are ([`crouch`]).
+    Crouch,
 }
 
 /// The landmarks a [`crouch`] keeps in place: the ankles, toe bases and toe tips.
@@ -372,16 +371,17 @@ impl Jump {
     /// Every jump: the flips, the nod, the swaps, then the crouch down. Not up:
     /// rising is within the search's own reach (the global group lifts the hips, the
     /// feet leave the ground at a finite cost, and the legs' groups straighten them
-    /// back onto it), where crouching is not ([`crouch`]). The jump up cost a sixth
-    /// of the jumps' evaluations; leaving it out saved 10% of the time for 0.002 of
-    /// PCK and 0.4 mm of PA-MPJPE on the benchmark (README "The crouch down
-    /// alone").
+    /// back onto it), where crouching is not ([`crouch`]). The jump up cost about a
+    /// sixth of the jumps' evaluations; leaving it out saved 10% of the time for
+    /// 0.002 of PCK and 0.4 mm of PA-MPJPE on the benchmark (README "The crouch
+    /// down alone").
     pub fn all() -> impl Iterator<Item = Jump> {
-        FLIPS
-            .iter()
-            .map(Jump::Flip)
-            .chain([Jump::NodIntoTrunk, Jump::SwapLegs, Jump::SwapArms])
-            .chain([Jump::Crouch(-CROUCH_CM)])
+        FLIPS.iter().map(Jump::Flip).chain([
+            Jump::NodIntoTrunk,
+            Jump::SwapLegs,
+            Jump::SwapArms,
+            Jump::Crouch,
+        ])
     }
 
     /// The parameters the jump changes (and the search then refines).
@@ -391,7 +391,7 @@ impl Jump {
             Jump::NodIntoTrunk => NOD_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::SwapLegs => LEG_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::SwapArms => ARM_GROUPS.iter().flat_map(|g| g.range()).collect(),
-            Jump::Crouch(_) => CROUCH_GROUPS.iter().flat_map(|g| g.range()).collect(),
+            Jump::Crouch => CROUCH_GROUPS.iter().flat_map(|g| g.range()).collect(),
         }
     }
 
@@ -407,7 +407,7 @@ impl Jump {
                 ix::R_SHOULDER,
                 ix::R_SHOULDER - ix::L_SHOULDER,
             ),
-            Jump::Crouch(d) => Some(crouch(body, pose, d)),
+            Jump::Crouch => Some(crouch(body, pose, -CROUCH_CM)),
         }
     }
 }

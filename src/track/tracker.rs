@@ -2480,7 +2480,7 @@ impl<'a> Search<'a> {
             // apart. The crouch may be turned off.
             let skip = match jump {
                 Jump::SwapLegs | Jump::SwapArms => !weigh,
-                Jump::Crouch(_) => !opts.crouch_jumps,
+                Jump::Crouch => !opts.crouch_jumps,
                 _ => false,
             };
             if skip {
