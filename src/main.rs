@@ -342,6 +342,10 @@ struct BenchArgs {
     /// under this (above 1 for every frame).
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_iou)]
     polish_iou: f64,
+    /// Whether the joint polish also runs on a frame whose cost spikes (over
+    /// `--recover-spike` times the recent median), whatever its IoU.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_spike, action = clap::ArgAction::Set)]
+    polish_spike: bool,
     /// Search a frame again widely when the model covers its silhouette with an IoU
     /// under this (at most every fifth frame); 0 for never.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().recover_iou)]
@@ -772,6 +776,7 @@ fn bench_command(a: BenchArgs) -> Result<()> {
         );
     }
     opts.track.polish_iou = a.polish_iou;
+    opts.track.polish_spike = a.polish_spike;
     if !(0.0..=1.0).contains(&a.recover_iou) {
         anyhow::bail!(
             "--recover-iou {}: expected an IoU from 0 to 1",

@@ -283,13 +283,21 @@ pub struct TrackOptions {
     /// median speed falls by a sixth to a quarter (on the DAVIS masks, whose frames
     /// mostly fit below 0.85, by a quarter, for a mean IoU of 0.790 against
     /// 0.781). Off by default for the speed it costs; the README's "The joint
-    /// polish where the fit is poor" has every variant measured.
+    /// polish where the fit is poor" has every variant measured. At 2,000
+    /// evaluations, firing on cost spikes too ([`TrackOptions::polish_spike`]), the
+    /// six benchmark runs' mean went PCK@0.1 0.928 → 0.933, PA-MPJPE 79.6 → 77.9 mm,
+    /// but lost frames 1 → 11, for about a tenth more CPU; still off (README, "The
+    /// joint polish again, where the fit is poor or the cost spikes").
     pub polish_evals: usize,
     /// The joint polish runs on frames whose IoU is under this (0.85 by default;
     /// above 1 for every frame). Most synthetic frames fit well already: spending
     /// the evaluations where the fit is poor keeps most of the speed (polishing
     /// every frame cost a third of it).
     pub polish_iou: f64,
+    /// The joint polish runs on a frame whose cost spikes too (on by default when
+    /// the polish is on): the same test as [`TrackOptions::recover_spike`]'s, on
+    /// the frame's result before the recovery, whatever its IoU.
+    pub polish_spike: bool,
     /// Whether each frame also tries the crouch down ([`Jump::Crouch`];
     /// README "The crouch as a jump"). On by default; off reproduces the tracker
     /// before it.
@@ -424,6 +432,7 @@ impl Default for TrackOptions {
             evals_per_param: 25,
             polish_evals: POLISH_EVALS,
             polish_iou: POLISH_IOU,
+            polish_spike: true,
             crouch_jumps: true,
             recover_iou: RECOVER_IOU,
             recover_spike: RECOVER_SPIKE,
@@ -2266,7 +2275,8 @@ impl<'a> Search<'a> {
         let mut iou = ev.iou(&best);
         // The joint polish where the fit is poor, within the reach around the result
         // (a jump may have left the box around the start).
-        if opts.polish_evals > 0 && iou < opts.polish_iou {
+        let spiking = opts.polish_spike && cost_spike(&history.costs, best_f, opts.recover_spike);
+        if opts.polish_evals > 0 && (iou < opts.polish_iou || spiking) {
             let (lo, hi) = self.reach_box(&best, &fixed);
             let (mut polished, mut polished_f) = (best, best_f);
             if self.polish(
