@@ -2275,8 +2275,10 @@ impl<'a> Search<'a> {
         let mut iou = ev.iou(&best);
         // The joint polish where the fit is poor, within the reach around the result
         // (a jump may have left the box around the start).
-        let spiking = opts.polish_spike && cost_spike(&history.costs, best_f, opts.recover_spike);
-        if opts.polish_evals > 0 && (iou < opts.polish_iou || spiking) {
+        if opts.polish_evals > 0
+            && (iou < opts.polish_iou
+                || opts.polish_spike && cost_spike(&history.costs, best_f, opts.recover_spike))
+        {
             let (lo, hi) = self.reach_box(&best, &fixed);
             let (mut polished, mut polished_f) = (best, best_f);
             if self.polish(
