@@ -346,6 +346,11 @@ struct BenchArgs {
     /// `--recover-spike` times the recent median), whatever its IoU.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().polish_spike, action = clap::ArgAction::Set)]
     polish_spike: bool,
+    /// Weight of the proportions prior in the initialisation's joint fit (the
+    /// ratios upper arm / forearm, thigh / shin, trunk / thigh held near the start
+    /// shape's); 0 for none (the default; README "The proportions prior").
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().shape_ratio_prior)]
+    w_ratio: f64,
     /// Search a frame again widely when the model covers its silhouette with an IoU
     /// under this (at most every fifth frame); 0 for never.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().recover_iou)]
@@ -777,6 +782,13 @@ fn bench_command(a: BenchArgs) -> Result<()> {
     }
     opts.track.polish_iou = a.polish_iou;
     opts.track.polish_spike = a.polish_spike;
+    if !a.w_ratio.is_finite() || a.w_ratio < 0.0 {
+        anyhow::bail!(
+            "--w-ratio {}: expected a weight from 0 (none) up",
+            a.w_ratio
+        );
+    }
+    opts.track.shape_ratio_prior = a.w_ratio;
     if !(0.0..=1.0).contains(&a.recover_iou) {
         anyhow::bail!(
             "--recover-iou {}: expected an IoU from 0 to 1",
