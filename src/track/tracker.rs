@@ -1364,10 +1364,10 @@ impl Tracker {
     /// in the joint fit"), plus the proportions prior ([`ratio_penalty`], against a
     /// segment traded for its neighbour). Each value moves in units of its length
     /// scale, with a spread of [`INIT_JOINT_SPREAD`] of them; the shape within its
-    /// plausible range. A larger or smaller body is moved away from or towards the camera in
-    /// proportion, and up or down, so that its head top and soles keep their place
-    /// in the picture: the size the silhouette shows is then kept while the
-    /// proportions change. The best shape and pose evaluated, when they cost less
+    /// plausible range. A larger or smaller body is moved away from or towards the
+    /// camera in proportion, and up or down, so that its head top and soles keep
+    /// their place in the picture: the size the silhouette shows is then kept while
+    /// the proportions change. The best shape and pose evaluated, when they cost less
     /// than the ones given.
     fn joint_fit(
         &self,
