@@ -1,9 +1,11 @@
-//! Renders per second of the silhouette rasterizer at 320×240 and 640×480, and of
-//! forward kinematics followed by a render (what the tracker pays per evaluation).
+//! Renders per second of the silhouette rasterizer at 320×240 and 640×480, of
+//! forward kinematics followed by a render, and of the parts' row spans
+//! (`span_parts`, what the tracker pays per evaluation when it counts shares of
+//! pixels, its default).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use monocap::body::params::{self, ix, MOTION};
-use monocap::body::raster::render_mask;
+use monocap::body::raster::{render_mask, span_parts, PartSpans};
 use monocap::body::{Body, Camera, Mask, Posed};
 use rand::{RngExt, SeedableRng};
 
@@ -47,6 +49,22 @@ fn bench(c: &mut Criterion) {
                 body.skeleton.pose(&poses[i], &mut out);
                 render_mask(&body, &out, &cam, &mut mask);
                 mask.words()[0]
+            })
+        });
+    }
+    group.finish();
+    let mut group = c.benchmark_group("span_parts");
+    group.throughput(Throughput::Elements(1));
+    let all: Vec<usize> = (0..body.parts.len()).collect();
+    for (w, h) in [(320u32, 240u32), (640, 480)] {
+        let cam = Camera::new(w, h, 55.0);
+        let mut spans = PartSpans::new(w, h);
+        let mut i = 0;
+        group.bench_function(BenchmarkId::from_parameter(format!("{w}x{h}")), |b| {
+            b.iter(|| {
+                i = (i + 1) % posed.len();
+                span_parts(&body, &posed[i], &cam, &all, &mut spans);
+                spans.rows(0)
             })
         });
     }

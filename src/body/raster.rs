@@ -431,18 +431,25 @@ impl Prepared {
         };
         // Each cap's span: where the ray meets the plane y = c inside the unit
         // circle, (o.x·d.y + s·d.x)² + (o.z·d.y + s·d.z)² ≤ d.y² with s = c − o.y,
-        // a quadratic in u with d = r + u·p.
+        // a quadratic in u with d = r + u·p whose leading coefficient is the same on
+        // every row. Not an ellipse in the image (a cap seen edge-on): bisect.
         let (p, q) = (&self.p, r);
-        let mut caps: Option<(f64, f64)> = None;
-        for c in [0.0, 1.0] {
+        let cap = |c: f64| {
             let s = c - o.y;
-            let (x0, x1) = (o.x * q.y + s * q.x, o.x * p.y + s * p.x);
-            let (z0, z1) = (o.z * q.y + s * q.z, o.z * p.y + s * p.z);
-            let a = x1 * x1 + z1 * z1 - p.y * p.y;
-            if a <= 0.0 {
-                // Not an ellipse in the image (a cap seen edge-on).
-                return Some(None);
-            }
+            let (x1, z1) = (o.x * p.y + s * p.x, o.z * p.y + s * p.z);
+            (s, x1, z1, x1 * x1 + z1 * z1 - p.y * p.y)
+        };
+        let ends = [cap(0.0), cap(1.0)];
+        if ends.iter().any(|e| e.3 <= 0.0) {
+            return Some(None);
+        }
+        // Both ends graze the side: the caps' spans are not needed.
+        if lo_in && hi_in {
+            return Some((lo < hi).then_some((lo, hi)));
+        }
+        let mut caps: Option<(f64, f64)> = None;
+        for (s, x1, z1, a) in ends {
+            let (x0, z0) = (o.x * q.y + s * q.x, o.z * q.y + s * q.z);
             let b = 2.0 * (x0 * x1 + z0 * z1 - q.y * p.y);
             let cc = x0 * x0 + z0 * z0 - q.y * q.y;
             if let Some((l, h)) = quadratic_roots(a, b, cc) {
@@ -450,6 +457,7 @@ impl Prepared {
             }
         }
         let (l, h) = match (lo_in, hi_in, caps) {
+            // (Both ends graze the side: returned above.)
             (true, true, _) => (lo, hi),
             (true, false, Some((_, ch))) => (lo, ch.min(hi)),
             (false, true, Some((cl, _))) => (cl.max(lo), hi),
