@@ -216,6 +216,10 @@ struct RefitArgs {
     /// accurate.
     #[arg(long)]
     no_middle_pass: bool,
+    /// Where the second pass starts: the best-scoring initial frame among each
+    /// block's last this many frames with a person (1 to 150; 1: the last one).
+    #[arg(long, default_value_t = 1)]
+    second_pass_window: usize,
     /// How each frame chooses among the passes' answers: over each block, the
     /// sequence with the least summed cost plus this many times the median
     /// frame's cost for each length scale the pose moves from a frame to the next
@@ -237,6 +241,12 @@ impl RefitArgs {
     fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
         track.two_way = !self.one_way;
         track.middle_pass = !self.no_middle_pass;
+        monocap::track::tracker::check_second_pass_window(
+            self.second_pass_window,
+            "--second-pass-window",
+        )
+        .map_err(anyhow::Error::msg)?;
+        track.second_pass_window = self.second_pass_window;
         monocap::track::tracker::check_switch_penalty(self.switch_penalty, "--switch-penalty")
             .map_err(anyhow::Error::msg)?;
         track.switch_penalty = self.switch_penalty;

@@ -484,6 +484,20 @@ fn bad_input_gives_one_clear_line() {
         &monocap(&["track", s(&clip), "-o", s(&out), "--switch-penalty", "1001"]),
         "--switch-penalty 1001",
     );
+    for bad in ["0", "151"] {
+        assert_fails_with(
+            "second pass window",
+            &monocap(&[
+                "track",
+                s(&clip),
+                "-o",
+                s(&out),
+                "--second-pass-window",
+                bad,
+            ]),
+            &format!("--second-pass-window {bad}: expected 1 to 150"),
+        );
+    }
     assert!(!out.exists(), "nothing written on failure");
 }
 

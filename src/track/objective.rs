@@ -150,6 +150,9 @@ pub struct Target {
     pub silhouette: Mask,
     /// Height of the person's bounding box in pixels (0 when there is no person).
     pub body_height: f64,
+    /// The frame's score as an initial frame (set by the tracker; −∞ until then):
+    /// the later passes choose where to start by it.
+    pub init_score: f64,
     /// The rewards withheld while tracking (all of them without
     /// [`Weights::track_rewards`], those of the reward rim [`Weights::reward_rim`]
     /// with): pixel index, edge reward, region reward (negative; 0 when none).
@@ -256,6 +259,7 @@ impl Target {
             heads,
             silhouette: s.clone(),
             body_height: f.body_height,
+            init_score: f64::NEG_INFINITY,
             withheld,
             edges: f.colour_edges.then(|| FrameEdges::new(&f.edges, s)),
             colours: f.colours.clone(),
