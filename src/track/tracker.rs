@@ -365,10 +365,10 @@ pub struct TrackOptions {
     /// (as the first pass chooses its own) among the block's last this many frames
     /// with a person, the latest among equals; it is then tracked backwards to the
     /// block's first frame and forwards to its last. 1 (the default): the last
-    /// frame with a person. A scratch build with 15 took the one frame the six
-    /// benchmark runs lose, CMU 131_01 from −120° on its last frame, where the
-    /// performer is crouched, from lost to found (README, "The one lost frame,
-    /// looked at"); not yet measured over the six runs.
+    /// frame with a person. With 15 the one frame the six benchmark runs lose, CMU
+    /// 131_01 from −120° on its last frame, where the performer is crouched, is
+    /// found, but over two of the runs it traded: seed 3 with a lead-in better,
+    /// seed 1 worse, with 5 lost frames (README, "The one lost frame, looked at").
     pub second_pass_window: usize,
     /// The middle pass (on by default; only with [`TrackOptions::two_way`]): each
     /// block is tracked a third time, initialised afresh (with the clip's shape) on
