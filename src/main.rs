@@ -226,6 +226,11 @@ struct RefitArgs {
     /// (0 to 1000; 0 takes each frame's cheapest answer).
     #[arg(long, default_value_t = monocap::track::tracker::SWITCH_PENALTY)]
     switch_penalty: f64,
+    /// A jump (a depth flip, the nod into the trunk, the crouch) whose refinement
+    /// still costs more than this many times the frame's result after one of its
+    /// groups is given up (0: never; 1 to 100).
+    #[arg(long, default_value_t = monocap::track::tracker::JUMP_GIVE_UP)]
+    jump_give_up: f64,
     /// The smoothed refit: each frame searched again from the Gaussian average of
     /// its neighbours' poses, this many frames wide (0 for none); on a helper
     /// thread behind the search when there are two threads or more.
@@ -250,6 +255,9 @@ impl RefitArgs {
         monocap::track::tracker::check_switch_penalty(self.switch_penalty, "--switch-penalty")
             .map_err(anyhow::Error::msg)?;
         track.switch_penalty = self.switch_penalty;
+        monocap::track::tracker::check_jump_give_up(self.jump_give_up, "--jump-give-up")
+            .map_err(anyhow::Error::msg)?;
+        track.jump_give_up = self.jump_give_up;
         let (sigma, runs) = (self.refit_sigma, self.refit_runs);
         monocap::track::tracker::check_refit(sigma, runs, ("--refit-sigma", "--refit-runs"))
             .map_err(anyhow::Error::msg)?;

@@ -498,6 +498,13 @@ fn bad_input_gives_one_clear_line() {
             &format!("--second-pass-window {bad}: expected 1 to 150"),
         );
     }
+    for bad in ["0.5", "101", "NaN"] {
+        assert_fails_with(
+            "jump give-up",
+            &monocap(&["track", s(&clip), "-o", s(&out), "--jump-give-up", bad]),
+            &format!("--jump-give-up {bad}: expected 0 (never) or 1 to 100"),
+        );
+    }
     assert!(!out.exists(), "nothing written on failure");
 }
 

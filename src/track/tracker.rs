@@ -197,6 +197,17 @@ pub fn check_switch_penalty(penalty: f64, name: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// The default of [`TrackOptions::jump_give_up`].
+pub const JUMP_GIVE_UP: f64 = 1.5;
+
+/// Checks a [`TrackOptions::jump_give_up`], named `name` in the message.
+pub fn check_jump_give_up(ratio: f64, name: &str) -> Result<(), String> {
+    if !(ratio == 0.0 || (1.0..=100.0).contains(&ratio)) {
+        return Err(format!("{name} {ratio}: expected 0 (never) or 1 to 100"));
+    }
+    Ok(())
+}
+
 /// Checks a [`TrackOptions::second_pass_window`], named `name` in the message.
 pub fn check_second_pass_window(window: usize, name: &str) -> Result<(), String> {
     if !(1..=TWO_WAY_BLOCK).contains(&window) {
@@ -317,6 +328,11 @@ pub struct TrackOptions {
     /// README "The crouch as a jump"). On by default; off reproduces the tracker
     /// before it.
     pub crouch_jumps: bool,
+    /// A jump ([`Search::try_jumps`]) whose refinement over several groups still
+    /// costs more than this many times the frame's result after one of them is
+    /// given up before the next (0: never). The swaps, which the inner outlines
+    /// judge rather than F, are always refined in full.
+    pub jump_give_up: f64,
     /// The smoothed refit ([`super::refit`]): each frame searched again from the
     /// Gaussian average of its neighbours' poses, this many frames wide (its
     /// standard deviation; 0 for none), the answer replacing the first pass's.
@@ -459,6 +475,7 @@ impl Default for TrackOptions {
             polish_spike: true,
             shape_ratio_prior: 0.0,
             crouch_jumps: true,
+            jump_give_up: JUMP_GIVE_UP,
             recover_iou: RECOVER_IOU,
             recover_spike: RECOVER_SPIKE,
             refit_sigma: REFIT_SIGMA,
@@ -2582,8 +2599,15 @@ impl<'a> Search<'a> {
                 lo[k] = (pose[k] - reach).max(MOTION[k].lo);
                 hi[k] = (pose[k] + reach).min(MOTION[k].hi);
             }
-            self.hierarchical(ev, &mut pose, &mut f, &lo, &hi, 1, opts.evals_per_param / 2);
-            if !f.is_finite() {
+            let give_up = match jump {
+                Jump::SwapLegs | Jump::SwapArms => f64::INFINITY,
+                _ if opts.jump_give_up > 0.0 && *best_f > 0.0 => opts.jump_give_up * *best_f,
+                _ => f64::INFINITY,
+            };
+            let per_param = opts.evals_per_param / 2;
+            let (_, done) =
+                self.hierarchical_until(ev, &mut pose, &mut f, (&lo, &hi), 1, per_param, give_up);
+            if !done || !f.is_finite() {
                 continue;
             }
             let better = if weigh {
@@ -2677,21 +2701,58 @@ impl<'a> Search<'a> {
         runs: usize,
         evals_per_param: usize,
     ) -> u64 {
+        let bounds = (lo, hi);
+        let (spent, _) = self.hierarchical_until(
+            ev,
+            best,
+            best_f,
+            bounds,
+            runs,
+            evals_per_param,
+            f64::INFINITY,
+        );
+        spent
+    }
+
+    /// [`Search::hierarchical`], given up before a group's simplex (the first
+    /// one searched aside) while the cost is still above `give_up`: the
+    /// evaluations spent, and whether it went through.
+    #[allow(clippy::too_many_arguments)]
+    fn hierarchical_until(
+        &self,
+        ev: &mut Evaluator,
+        best: &mut Pose,
+        best_f: &mut f64,
+        (lo, hi): (&Pose, &Pose),
+        runs: usize,
+        evals_per_param: usize,
+        give_up: f64,
+    ) -> (u64, bool) {
         let opts = &self.tracker.opts;
         let before = ev.evals;
         let mut order = Group::ALL;
         if !opts.global_first {
             order.reverse();
         }
-        for _ in 0..runs.max(1) {
+        let mut searched = false;
+        let mut done = true;
+        'runs: for _ in 0..runs.max(1) {
             for g in order {
                 let params: Vec<usize> = g.range().filter(|&k| lo[k] < hi[k]).collect();
+                if params.is_empty() {
+                    continue;
+                }
+                if searched && *best_f > give_up {
+                    done = false;
+                    break 'runs;
+                }
                 let budget = evals_per_param * (params.len() + 1);
                 self.simplex_over(ev, best, best_f, &params, lo, hi, budget);
+                searched = true;
             }
         }
         ev.unfocus();
-        ev.evals - before
+        (ev.evals - before, done)
     }
 
     /// One simplex over `params` from `best` within [lo, hi]; keeps the result when
@@ -3175,6 +3236,43 @@ mod tests {
             },
         );
         assert!(none.joint_fit(&target, &STANDARD_SHAPE, &pose).is_none());
+    }
+
+    #[test]
+    fn a_search_given_up_stops_after_its_first_group_while_too_dear() {
+        // The arms and legs far from the frame's: after the first group searched
+        // (the right leg) the cost is still above the bar, so no other group is.
+        let (cam, target, truth) = typical_performer_frame();
+        let tracker = Tracker::new(cam, TrackOptions::default());
+        let body = Body::new(&crate::body::params::TYPICAL_SHAPE);
+        let search = Search::new(&tracker, &body, f64::NEG_INFINITY);
+        let mut ev = search.evaluator(&target);
+        let mut start = truth;
+        for k in [ix::L_SHOULDER + 1, ix::R_ELBOW, ix::L_HIP, ix::R_KNEE] {
+            start[k] = 0.0;
+        }
+        let (lo, hi) = search.reach_box(&start, &[false; MOTION_COUNT]);
+        let f0 = ev.cost(&start);
+        let run = |give_up: f64, ev: &mut Evaluator| {
+            let (mut pose, mut f) = (start, f0);
+            let (spent, done) =
+                search.hierarchical_until(ev, &mut pose, &mut f, (&lo, &hi), 1, 12, give_up);
+            (spent, done, f)
+        };
+        let (spent_all, done_all, f_all) = run(f64::INFINITY, &mut ev);
+        let (spent_cut, done_cut, f_cut) = run(f0 * 0.5, &mut ev);
+        println!("f0 {f0:.1}: in full {f_all:.1} ({spent_all} evaluations), given up {f_cut:.1} ({spent_cut})");
+        assert!(done_all && !done_cut);
+        let first = 12 * (Group::RightLeg.range().len() + 1) as u64;
+        assert!(
+            spent_cut <= first,
+            "{spent_cut} evaluations after giving up"
+        );
+        assert!(spent_all > 3 * first, "{spent_all} evaluations in full");
+        assert!(
+            f_cut > f0 * 0.5 && f_all <= f_cut,
+            "{f_all} in full, {f_cut} given up"
+        );
     }
 
     #[test]
