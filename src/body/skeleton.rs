@@ -317,22 +317,51 @@ impl Skeleton {
         let kept = |i: usize| keep.filter(|(_, moved)| !moved[i]).map(|(base, _)| base);
         for j in Joint::ALL {
             let i = j.index();
-            if let Some(base) = kept(i) {
-                out.joints[i] = base.joints[i];
-                continue;
+            match kept(i) {
+                Some(base) => out.joints[i] = base.joints[i],
+                None => self.pose_joint(j, pose, out),
             }
-            let local = self.local(j, pose);
-            out.joints[i] = match j.parent() {
-                Some(p) => out.joints[p.index()] * local,
-                None => local,
-            };
         }
         for (i, t) in Tip::ALL.iter().enumerate() {
-            out.tips[i] = match kept(t.joint().index()) {
-                Some(base) => base.tips[i],
-                None => out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]),
-            };
+            match kept(t.joint().index()) {
+                Some(base) => out.tips[i] = base.tips[i],
+                None => self.pose_tip(i, *t, out),
+            }
         }
+    }
+
+    /// [`Skeleton::pose_moved`] in place: `out` already holds, for every joint
+    /// `moved` leaves out, the frame a base pose gives it (it was posed in full
+    /// from that base, and since only from poses that differ from it in
+    /// parameters of moved joints), so only the moved joints and the tips on them
+    /// are posed again. The same result as posing in full, with nothing copied.
+    pub fn repose_moved(&self, pose: &Pose, moved: &[bool; JOINT_COUNT], out: &mut Posed) {
+        for j in Joint::ALL {
+            if moved[j.index()] {
+                self.pose_joint(j, pose, out);
+            }
+        }
+        for (i, t) in Tip::ALL.iter().enumerate() {
+            if moved[t.joint().index()] {
+                self.pose_tip(i, *t, out);
+            }
+        }
+    }
+
+    /// Poses joint `j` in `out`, whose frame of its parent is already posed.
+    #[inline]
+    fn pose_joint(&self, j: Joint, pose: &Pose, out: &mut Posed) {
+        let local = self.local(j, pose);
+        out.joints[j.index()] = match j.parent() {
+            Some(p) => out.joints[p.index()] * local,
+            None => local,
+        };
+    }
+
+    /// Places tip `t` (the `i`-th) in `out`, whose frame of its joint is posed.
+    #[inline]
+    fn pose_tip(&self, i: usize, t: Tip, out: &mut Posed) {
+        out.tips[i] = out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]);
     }
 
     /// Joint `j`'s frame in its parent's at `pose`.
@@ -410,17 +439,29 @@ impl Posed {
         Point3::from(self.joints[j.index()].translation.vector)
     }
 
+    /// Landmark `i` of [`Posed::landmarks`]: joint `i`, or tip `i − JOINT_COUNT`.
+    #[inline]
+    pub fn landmark(&self, i: usize) -> Point3<f64> {
+        if i < JOINT_COUNT {
+            Point3::from(self.joints[i].translation.vector)
+        } else {
+            self.tips[i - JOINT_COUNT]
+        }
+    }
+
     /// The 18 joint positions followed by the 5 tips.
     pub fn landmarks(&self) -> [Point3<f64>; LANDMARK_COUNT] {
-        let mut out = [Point3::origin(); LANDMARK_COUNT];
-        for (i, o) in out.iter_mut().enumerate() {
-            *o = if i < JOINT_COUNT {
-                Point3::from(self.joints[i].translation.vector)
-            } else {
-                self.tips[i - JOINT_COUNT]
-            };
-        }
-        out
+        std::array::from_fn(|i| self.landmark(i))
+    }
+}
+
+/// The index of the joint whose frame carries landmark `i` ([`Posed::landmarks`]):
+/// the joint itself, or the tip's; None past the last landmark.
+pub fn landmark_joint(i: usize) -> Option<usize> {
+    if i < JOINT_COUNT {
+        Some(i)
+    } else {
+        Tip::ALL.get(i - JOINT_COUNT).map(|t| t.joint().index())
     }
 }
 
@@ -469,6 +510,32 @@ mod tests {
     }
 
     #[test]
+    fn each_landmark_is_carried_by_its_joint() {
+        let (sk, mut pose) = standard_rest();
+        let before = sk.posed(&pose);
+        assert_eq!(landmark_joint(LANDMARK_COUNT), None);
+        // A landmark that moves with the left shoulder's turn is carried by a
+        // joint the turn moves.
+        pose[crate::body::params::ix::L_SHOULDER] += 30.0;
+        let after = sk.posed(&pose);
+        let moved = joints_moved_by(&[crate::body::params::ix::L_SHOULDER]);
+        for i in 0..LANDMARK_COUNT {
+            assert_eq!(after.landmark(i), after.landmarks()[i]);
+            let j = landmark_joint(i).expect("a landmark");
+            let shifted = (after.landmark(i) - before.landmark(i)).norm() > 1e-9;
+            assert!(
+                !shifted || moved[j],
+                "landmark {i} moved with joint {j} still"
+            );
+        }
+        let hand_tip = JOINT_COUNT + Tip::LeftHandTip as usize;
+        assert!((after.landmark(hand_tip) - before.landmark(hand_tip)).norm() > 1.0);
+        for (k, t) in Tip::ALL.iter().enumerate() {
+            assert_eq!(landmark_joint(JOINT_COUNT + k), Some(t.joint().index()));
+        }
+    }
+
+    #[test]
     fn posing_the_moved_joints_alone_matches_posing_all() {
         let (sk, mut from) = standard_rest();
         for (k, v) in from.iter_mut().enumerate() {
@@ -489,6 +556,19 @@ mod tests {
             sk.pose_moved(&pose, &base, &moved, &mut part);
             assert_eq!(part.joints, full.joints, "{}", g.name());
             assert_eq!(part.tips, full.tips, "{}", g.name());
+            // In place, from the base and then from another pose of the group's.
+            let mut here = base.clone();
+            sk.repose_moved(&pose, &moved, &mut here);
+            assert_eq!(here.joints, full.joints, "{}", g.name());
+            assert_eq!(here.tips, full.tips, "{}", g.name());
+            let mut again = pose;
+            for &k in &params {
+                again[k] -= 20.0;
+            }
+            sk.repose_moved(&again, &moved, &mut here);
+            let full = sk.posed(&again);
+            assert_eq!(here.joints, full.joints, "{}", g.name());
+            assert_eq!(here.tips, full.tips, "{}", g.name());
             let kept = moved.iter().filter(|m| !**m).count();
             assert_eq!(kept == 0, g == crate::body::params::Group::Global);
         }

@@ -25,7 +25,9 @@ use nalgebra::Point3;
 
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{clamp_to_limits, ix, Group, Pose, MOTION};
-use crate::body::skeleton::{joints_moved_by, Joint, Tip, JOINT_COUNT, LANDMARK_COUNT};
+use crate::body::skeleton::{
+    joints_moved_by, landmark_joint, Joint, Posed, Tip, JOINT_COUNT, LANDMARK_COUNT,
+};
 use crate::body::Body;
 
 /// What a flip does with the far end of one bone.
@@ -486,17 +488,19 @@ fn fit_landmarks_weighted<const N: usize>(
         }
         p
     };
-    // Only the joints the parameters move are posed again for each trial.
+    // Only the joints the parameters move are posed again for each trial, in
+    // place, and only the landmarks whose share can be other than 0 summed (in
+    // order: the sum is the same as over all of them).
     let moved = joints_moved_by(params);
-    let posed_base = body.posed(&base);
-    let mut posed = posed_base.clone();
+    let mut posed = body.posed(&base);
+    let share =
+        |posed: &Posed, i: usize| weight[i] * (posed.landmark(i) - target[i]).norm_squared();
+    let counted: Vec<usize> = (0..LANDMARK_COUNT)
+        .filter(|&i| landmark_joint(i).is_some_and(|j| moved[j]) || share(&posed, i) != 0.0)
+        .collect();
     let mut misfit = |x: &[f64]| -> f64 {
-        body.skeleton
-            .pose_moved(&fit(x), &posed_base, &moved, &mut posed);
-        let got = posed.landmarks();
-        (0..LANDMARK_COUNT)
-            .map(|i| weight[i] * (got[i] - target[i]).norm_squared())
-            .sum()
+        body.skeleton.repose_moved(&fit(x), &moved, &mut posed);
+        counted.iter().map(|&i| share(&posed, i)).sum()
     };
     // Landmarks within a centimetre or so are enough: the search refines the
     // result on the frame itself.

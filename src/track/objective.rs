@@ -168,6 +168,8 @@ pub struct Target {
     /// The gain maps' row-by-row running sums, for [`Weights::smooth`] (made on
     /// first use).
     sums: OnceLock<RunningSums>,
+    /// Whether the limbs' gain map is all zero (found on first use).
+    limb_free: OnceLock<bool>,
 }
 
 /// Each gain map's running sums along its rows: `width + 1` per row, the entry at
@@ -265,6 +267,7 @@ impl Target {
             colours: f.colours.clone(),
             skin_gain: Vec::new(),
             sums: OnceLock::new(),
+            limb_free: OnceLock::new(),
         }
     }
 
@@ -308,11 +311,19 @@ impl Target {
         }
         let mut t = self.clone();
         t.sums = OnceLock::new();
+        t.limb_free = OnceLock::new();
         for (i, edge, region) in std::mem::take(&mut t.withheld) {
             t.gain[i] += edge;
             t.limb_gain[i] = region;
         }
         Some(t)
+    }
+
+    /// Whether the limbs' gain map is all zero.
+    fn limb_free(&self) -> bool {
+        *self
+            .limb_free
+            .get_or_init(|| self.limb_gain.iter().all(|&g| g == 0.0))
     }
 
     /// Whether the frame shows a person at all.
@@ -387,6 +398,9 @@ pub struct Evaluator<'a> {
     /// (the others are copied from `base`, the focused pose posed in full).
     moved: Option<[bool; JOINT_COUNT]>,
     base: Posed,
+    /// `posed` holds `base`'s frames for the joints `moved` leaves out (it was
+    /// last posed while focused), so that only the moved ones are posed again.
+    posed_on_base: bool,
     /// The layers counted by the share of each row the model covers
     /// ([`Weights::smooth`]), used instead of `all`, `limbs` and `skin`.
     smooth: Option<Box<Smooth>>,
@@ -416,20 +430,32 @@ impl<'a> Evaluator<'a> {
         );
         // Tracking without rewards leaves the limbs' map all zero: their layer
         // would add nothing.
-        let limb_free = target.limb_gain.iter().all(|&g| g == 0.0);
+        let limb_free = target.limb_free();
+        let drawn = !weights.smooth;
         Evaluator {
             body,
             cam,
             target,
             weights,
             ground,
-            all: Layer::new(cam, (0..PART_COUNT).filter(|&i| !is_limb(i)).collect()),
-            limbs: Layer::new(cam, (0..PART_COUNT).filter(|&i| is_limb(i)).collect()),
-            skin: (!target.skin_gain.is_empty())
-                .then(|| Layer::new(cam, (0..PART_COUNT).filter(|&i| is_bare(body, i)).collect())),
+            all: Layer::new(
+                cam,
+                (0..PART_COUNT).filter(|&i| !is_limb(i)).collect(),
+                drawn,
+            ),
+            limbs: Layer::new(
+                cam,
+                (0..PART_COUNT).filter(|&i| is_limb(i)).collect(),
+                drawn,
+            ),
+            skin: (!target.skin_gain.is_empty()).then(|| {
+                let bare = (0..PART_COUNT).filter(|&i| is_bare(body, i)).collect();
+                Layer::new(cam, bare, drawn)
+            }),
             posed: Posed::default(),
             moved: None,
             base: Posed::default(),
+            posed_on_base: false,
             smooth: weights
                 .smooth
                 .then(|| Box::new(Smooth::new(body, cam, target, !limb_free))),
@@ -473,6 +499,7 @@ impl<'a> Evaluator<'a> {
             .collect();
         self.body.skeleton.pose(pose, &mut self.base);
         self.moved = Some(moves);
+        self.posed_on_base = false;
         self.prior_focus = self.prior.map(|p| p.focus(pose, params));
         if let Some(sm) = &mut self.smooth {
             sm.focus(self.body, &self.base, self.cam, self.target, &moves);
@@ -511,6 +538,7 @@ impl<'a> Evaluator<'a> {
     /// Every part moves again.
     pub fn unfocus(&mut self) {
         self.moved = None;
+        self.posed_on_base = false;
         self.prior_focus = None;
         if let Some(sm) = &mut self.smooth {
             sm.unfocus();
@@ -530,13 +558,15 @@ impl<'a> Evaluator<'a> {
         if !within_limits(pose) {
             return f64::INFINITY;
         }
+        let skeleton = &self.body.skeleton;
         match &self.moved {
-            Some(moved) => self
-                .body
-                .skeleton
-                .pose_moved(pose, &self.base, moved, &mut self.posed),
-            None => self.body.skeleton.pose(pose, &mut self.posed),
+            Some(moved) if self.posed_on_base => {
+                skeleton.repose_moved(pose, moved, &mut self.posed)
+            }
+            Some(moved) => skeleton.pose_moved(pose, &self.base, moved, &mut self.posed),
+            None => skeleton.pose(pose, &mut self.posed),
         }
+        self.posed_on_base = self.moved.is_some();
         if self.below_ground() {
             return f64::INFINITY;
         }
@@ -625,6 +655,7 @@ impl<'a> Evaluator<'a> {
     /// The model's whole silhouette at `pose`.
     pub fn render(&mut self, pose: &Pose, out: &mut Mask) {
         self.body.skeleton.pose(pose, &mut self.posed);
+        self.posed_on_base = false;
         out.clear();
         let all: [usize; PART_COUNT] = std::array::from_fn(|i| i);
         render_parts(self.body, &self.posed, self.cam, &all, out);
@@ -736,12 +767,19 @@ struct Layer {
 }
 
 impl Layer {
-    fn new(cam: &Camera, moving: Vec<usize>) -> Layer {
+    /// A layer of the parts `moving`; its masks are the camera's size when it is
+    /// `drawn` (by the pixel objective), and empty for the smooth objective
+    /// ([`Weights::smooth`]), which draws none.
+    fn new(cam: &Camera, moving: Vec<usize>, drawn: bool) -> Layer {
+        let mask = || match drawn {
+            true => Mask::new(cam.width, cam.height),
+            false => Mask::new(0, 0),
+        };
         Layer {
             moving,
-            fixed: Mask::new(cam.width, cam.height),
+            fixed: mask(),
             fixed_sum: 0.0,
-            scratch: Mask::new(cam.width, cam.height),
+            scratch: mask(),
             drawn: None,
         }
     }
