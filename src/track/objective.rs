@@ -395,7 +395,8 @@ pub struct Evaluator<'a> {
     skin: Option<Layer>,
     posed: Posed,
     /// While focused ([`Evaluator::focus`]): the joints the focused parameters move
-    /// (the others are copied from `base`, the focused pose posed in full).
+    /// (the others take their frames from `base`, the focused pose posed in full:
+    /// copied once, then kept in `posed`).
     moved: Option<[bool; JOINT_COUNT]>,
     base: Posed,
     /// `posed` holds `base`'s frames for the joints `moved` leaves out (it was
@@ -431,7 +432,7 @@ impl<'a> Evaluator<'a> {
         // Tracking without rewards leaves the limbs' map all zero: their layer
         // would add nothing.
         let limb_free = target.limb_free();
-        let drawn = !weights.smooth;
+        let with_masks = !weights.smooth;
         Evaluator {
             body,
             cam,
@@ -441,16 +442,16 @@ impl<'a> Evaluator<'a> {
             all: Layer::new(
                 cam,
                 (0..PART_COUNT).filter(|&i| !is_limb(i)).collect(),
-                drawn,
+                with_masks,
             ),
             limbs: Layer::new(
                 cam,
                 (0..PART_COUNT).filter(|&i| is_limb(i)).collect(),
-                drawn,
+                with_masks,
             ),
             skin: (!target.skin_gain.is_empty()).then(|| {
                 let bare = (0..PART_COUNT).filter(|&i| is_bare(body, i)).collect();
-                Layer::new(cam, bare, drawn)
+                Layer::new(cam, bare, with_masks)
             }),
             posed: Posed::default(),
             moved: None,
@@ -768,10 +769,10 @@ struct Layer {
 
 impl Layer {
     /// A layer of the parts `moving`; its masks are the camera's size when it is
-    /// `drawn` (by the pixel objective), and empty for the smooth objective
-    /// ([`Weights::smooth`]), which draws none.
-    fn new(cam: &Camera, moving: Vec<usize>, drawn: bool) -> Layer {
-        let mask = || match drawn {
+    /// drawn into (`with_masks`: by the pixel objective), and empty for the smooth
+    /// objective ([`Weights::smooth`]), which draws none.
+    fn new(cam: &Camera, moving: Vec<usize>, with_masks: bool) -> Layer {
+        let mask = || match with_masks {
             true => Mask::new(cam.width, cam.height),
             false => Mask::new(0, 0),
         };
