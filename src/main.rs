@@ -236,9 +236,13 @@ struct RefitArgs {
     /// thread behind the search when there are two threads or more.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_sigma)]
     refit_sigma: f64,
-    /// Runs of the search in each frame's refit.
+    /// Runs of the search in each frame's refit, at most (see --refit-again-iou).
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().refit_runs)]
     refit_runs: usize,
+    /// A frame's refit runs the search again only while its model IoU is under
+    /// this (0: one run everywhere; 1: all of --refit-runs on every frame).
+    #[arg(long, default_value_t = monocap::track::tracker::REFIT_AGAIN_IOU)]
+    refit_again_iou: f64,
 }
 
 impl RefitArgs {
@@ -263,6 +267,9 @@ impl RefitArgs {
             .map_err(anyhow::Error::msg)?;
         track.refit_sigma = sigma;
         track.refit_runs = runs;
+        monocap::track::tracker::check_refit_again_iou(self.refit_again_iou, "--refit-again-iou")
+            .map_err(anyhow::Error::msg)?;
+        track.refit_again_iou = self.refit_again_iou;
         Ok(())
     }
 }

@@ -444,6 +444,10 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_runs": 20}), true);
     check(serde_json::json!({"refit_runs": 0}), false);
     check(serde_json::json!({"refit_runs": 21}), false);
+    check(serde_json::json!({"refit_again_iou": 0.0}), true);
+    check(serde_json::json!({"refit_again_iou": 1.0}), true);
+    check(serde_json::json!({"refit_again_iou": 1.5}), false);
+    check(serde_json::json!({"refit_again_iou": -0.1}), false);
     check(serde_json::json!({"switch_penalty": 0.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.5}), false);

@@ -480,6 +480,11 @@ fn bad_input_gives_one_clear_line() {
         "--refit-runs 0",
     );
     assert_fails_with(
+        "refit again IoU",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--refit-again-iou", "1.5"]),
+        "--refit-again-iou 1.5: expected 0",
+    );
+    assert_fails_with(
         "switch penalty",
         &monocap(&["track", s(&clip), "-o", s(&out), "--switch-penalty", "1001"]),
         "--switch-penalty 1001",
@@ -901,6 +906,62 @@ fn the_smoothed_refit_searches_every_frame_again() {
     );
     assert!(changed * 2 > frames.len(), "{changed} frames changed");
     assert!(iou_on > iou_off - 0.02, "IoU {iou_off:.3} -> {iou_on:.3}");
+}
+
+/// The refit's runs after the first go only to the frames the first leaves fitted
+/// poorly: with `refit_again_iou` at the median of one run's IoUs, a frame at or
+/// above it keeps the one run's answer and a frame under it gets the two runs'
+/// answer, exactly (each frame's refit depends only on the first pass).
+#[test]
+fn the_refit_searches_again_only_where_the_fit_is_poor() {
+    let (frames, opts) = run_colour_inputs();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let run = |refit_runs: usize, refit_again_iou: f64| {
+        let inputs = frames.iter().map(|f| {
+            Ok(FrameInput {
+                silhouette: f.silhouette.clone(),
+                image: f.image.clone(),
+            })
+        });
+        let opts = TrackOptions {
+            refit_runs,
+            refit_again_iou,
+            two_way: false,
+            middle_pass: false,
+            ..TrackOptions::default()
+        };
+        Tracker::new(cam.clone(), opts)
+            .track(inputs, Some(frames.len()), |_, _| ControlFlow::Continue(()))
+            .unwrap()
+    };
+    let once = run(1, 0.0);
+    let mut ious: Vec<f64> = once.frames.iter().filter_map(|f| f.iou).collect();
+    ious.sort_by(f64::total_cmp);
+    let median = ious[ious.len() / 2];
+    let (twice, chosen) = (run(2, 1.0), run(2, median));
+    let (mut kept, mut again) = (0, 0);
+    for ((one, two), got) in once.frames.iter().zip(&twice.frames).zip(&chosen.frames) {
+        let Some(iou) = one.iou else {
+            assert_eq!(got.pose, one.pose, "frame {} has no person", got.index);
+            continue;
+        };
+        if iou >= median {
+            assert_eq!(got.pose, one.pose, "frame {}: IoU {iou:.3}", got.index);
+            kept += 1;
+        } else {
+            assert_eq!(got.pose, two.pose, "frame {}: IoU {iou:.3}", got.index);
+            again += 1;
+        }
+    }
+    let differ = once
+        .frames
+        .iter()
+        .zip(&twice.frames)
+        .filter(|(a, b)| a.pose != b.pose)
+        .count();
+    println!("IoU at or over {median:.3}: {kept} frames kept, {again} searched again; a second run changed {differ}");
+    assert!(kept > 0 && again > 0, "{kept} kept, {again} again");
+    assert!(differ > 0, "a second run changed no frame");
 }
 
 /// Features computed on helper threads ahead of the search, the initialisation's

@@ -5,7 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
-use crate::track::tracker::{check_refit, check_switch_penalty, MAX_POLISH_EVALS};
+use crate::track::tracker::{
+    check_refit, check_refit_again_iou, check_switch_penalty, MAX_POLISH_EVALS,
+};
 use crate::vision::background::EmptyFrames;
 
 /// Every field is optional; an unknown field is an error, not silently ignored.
@@ -26,9 +28,15 @@ pub struct JobOptions {
     /// `TrackOptions::refit_sigma`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_sigma: Option<f64>,
-    /// Runs of the search in each frame's refit, 1 to 20 (default 2).
+    /// Runs of the search in each frame's refit at most, 1 to 20 (default 2; the
+    /// runs after the first only while the frame's model IoU is under
+    /// `refit_again_iou`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_runs: Option<usize>,
+    /// The model IoU under which a frame's refit searches again, 0 (one run
+    /// everywhere) to 1 (every run on every frame; default 0.85).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_again_iou: Option<f64>,
     /// The second pass, backwards over each block of up to 150 frames (default true;
     /// see `TrackOptions::two_way`): more accurate; false (no middle pass either)
     /// is about twice as fast.
@@ -164,6 +172,10 @@ impl JobOptions {
         let runs = self.refit_runs.unwrap_or(o.track.refit_runs);
         check_refit(sigma, runs, ("refit_sigma", "refit_runs"))?;
         (o.track.refit_sigma, o.track.refit_runs) = (sigma, runs);
+        if let Some(iou) = self.refit_again_iou {
+            check_refit_again_iou(iou, "refit_again_iou")?;
+            o.track.refit_again_iou = iou;
+        }
         if let Some(t) = self.middle_pass {
             o.track.middle_pass = t;
         }

@@ -159,6 +159,8 @@ pub const MAX_INIT_FRAME: usize = 1800;
 pub const REFIT_SIGMA: f64 = 1.5;
 /// Runs of the search in each frame's refit ([`TrackOptions::refit_runs`]).
 pub const REFIT_RUNS: usize = 2;
+/// The default of [`TrackOptions::refit_again_iou`].
+pub const REFIT_AGAIN_IOU: f64 = 0.85;
 /// The widest smoothed refit a job may ask for (frames; it averages over three
 /// times as many either side).
 pub const MAX_REFIT_SIGMA: f64 = 10.0;
@@ -179,6 +181,16 @@ pub fn check_refit(sigma: f64, runs: usize, names: (&str, &str)) -> Result<(), S
         return Err(format!(
             "{} {runs}: expected 1 to {MAX_REFIT_RUNS}",
             names.1
+        ));
+    }
+    Ok(())
+}
+
+/// Checks a [`TrackOptions::refit_again_iou`], named `name` in the message.
+pub fn check_refit_again_iou(iou: f64, name: &str) -> Result<(), String> {
+    if !(0.0..=1.0).contains(&iou) {
+        return Err(format!(
+            "{name} {iou}: expected 0 (one run on every frame) to 1 (all of them)"
         ));
     }
     Ok(())
@@ -346,8 +358,15 @@ pub struct TrackOptions {
     /// → 30, 24 → 20) kept, for 3–4% of the speed; the README's "The smoothed
     /// refit" has the variants measured.
     pub refit_sigma: f64,
-    /// Runs of the hierarchical search in each frame's refit.
+    /// Runs of the hierarchical search in each frame's refit, at most: the
+    /// runs after the first go on only while the frame's model IoU is under
+    /// [`TrackOptions::refit_again_iou`].
     pub refit_runs: usize,
+    /// A frame's refit searches again (up to [`TrackOptions::refit_runs`] runs)
+    /// only while its model covers the silhouette with an IoU under this (0.85 by
+    /// default; 0: one run everywhere, 1: every run on every frame). Most frames
+    /// are fitted after one run; the poorly fitted ones are those a second helps.
+    pub refit_again_iou: f64,
     /// A frame whose model covers its silhouette with an IoU under this is taken for
     /// a loss and searched again widely, at most every fifth frame (0.75 by default,
     /// 0 for never): wide fits from the result and from it turned 60° either way.
@@ -480,6 +499,7 @@ impl Default for TrackOptions {
             recover_spike: RECOVER_SPIKE,
             refit_sigma: REFIT_SIGMA,
             refit_runs: REFIT_RUNS,
+            refit_again_iou: REFIT_AGAIN_IOU,
             two_way: true,
             second_pass_window: 1,
             middle_pass: true,
@@ -2427,19 +2447,29 @@ impl<'a> Search<'a> {
         let mut best = start;
         let mut best_f = ev.cost(&start);
         let (lo, hi) = self.reach_box(&start, &[false; MOTION_COUNT]);
-        self.hierarchical(
-            &mut ev,
-            &mut best,
-            &mut best_f,
-            &lo,
-            &hi,
-            opts.refit_runs,
-            opts.evals_per_param,
-        );
+        let mut iou = f64::NAN;
+        for run in 0..opts.refit_runs {
+            if run > 0 && iou >= opts.refit_again_iou {
+                break;
+            }
+            self.hierarchical(
+                &mut ev,
+                &mut best,
+                &mut best_f,
+                &lo,
+                &hi,
+                1,
+                opts.evals_per_param,
+            );
+            iou = if best_f.is_finite() {
+                ev.iou(&best)
+            } else {
+                f64::NAN
+            };
+        }
         if !best_f.is_finite() {
             return (frame, ev.evals);
         }
-        let iou = ev.iou(&best);
         let refitted = TrackedFrame {
             pose: best,
             cost: Some(best_f),
