@@ -939,29 +939,28 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
     ious.sort_by(f64::total_cmp);
     let median = ious[ious.len() / 2];
     let (twice, chosen) = (run(2, 1.0), run(2, median));
+    // Frames on which a second run changes the answer, on either side of the
+    // threshold: without both, a rule that never or always runs again would pass.
     let (mut kept, mut again) = (0, 0);
     for ((one, two), got) in once.frames.iter().zip(&twice.frames).zip(&chosen.frames) {
         let Some(iou) = one.iou else {
             assert_eq!(got.pose, one.pose, "frame {} has no person", got.index);
             continue;
         };
+        let differ = one.pose != two.pose;
         if iou >= median {
             assert_eq!(got.pose, one.pose, "frame {}: IoU {iou:.3}", got.index);
-            kept += 1;
+            kept += differ as usize;
         } else {
             assert_eq!(got.pose, two.pose, "frame {}: IoU {iou:.3}", got.index);
-            again += 1;
+            again += differ as usize;
         }
     }
-    let differ = once
-        .frames
-        .iter()
-        .zip(&twice.frames)
-        .filter(|(a, b)| a.pose != b.pose)
-        .count();
-    println!("IoU at or over {median:.3}: {kept} frames kept, {again} searched again; a second run changed {differ}");
+    println!(
+        "IoU at or over {median:.3}: {kept} frames keep one run's answer where a second \
+         would change it; under it {again} take the second run's different answer"
+    );
     assert!(kept > 0 && again > 0, "{kept} kept, {again} again");
-    assert!(differ > 0, "a second run changed no frame");
 }
 
 /// Features computed on helper threads ahead of the search, the initialisation's

@@ -190,7 +190,7 @@ pub fn check_refit(sigma: f64, runs: usize, names: (&str, &str)) -> Result<(), S
 pub fn check_refit_again_iou(iou: f64, name: &str) -> Result<(), String> {
     if !(0.0..=1.0).contains(&iou) {
         return Err(format!(
-            "{name} {iou}: expected 0 (one run on every frame) to 1 (all of them)"
+            "{name} {iou}: expected 0 (one run on every frame) to 1 (every run on every frame)"
         ));
     }
     Ok(())
@@ -364,8 +364,10 @@ pub struct TrackOptions {
     pub refit_runs: usize,
     /// A frame's refit searches again (up to [`TrackOptions::refit_runs`] runs)
     /// only while its model covers the silhouette with an IoU under this (0.85 by
-    /// default; 0: one run everywhere, 1: every run on every frame). Most frames
-    /// are fitted after one run; the poorly fitted ones are those a second helps.
+    /// default; 0: one run everywhere, 1: every run on every frame; a run that
+    /// leaves the cost infinite, below the ground, is always followed by another).
+    /// Where the first run fits well a second moves the joints little (README
+    /// "The refit's second run where the fit is poor").
     pub refit_again_iou: f64,
     /// A frame whose model covers its silhouette with an IoU under this is taken for
     /// a loss and searched again widely, at most every fifth frame (0.75 by default,
@@ -2448,8 +2450,10 @@ impl<'a> Search<'a> {
         let mut best_f = ev.cost(&start);
         let (lo, hi) = self.reach_box(&start, &[false; MOTION_COUNT]);
         let mut iou = f64::NAN;
-        for run in 0..opts.refit_runs {
-            if run > 0 && iou >= opts.refit_again_iou {
+        for run in 0..opts.refit_runs.max(1) {
+            // NaN (an infinite cost) never stops it; 1 runs them all, even on a
+            // perfect fit.
+            if run > 0 && opts.refit_again_iou < 1.0 && iou >= opts.refit_again_iou {
                 break;
             }
             self.hierarchical(
