@@ -2450,12 +2450,7 @@ impl<'a> Search<'a> {
         let mut best_f = ev.cost(&start);
         let (lo, hi) = self.reach_box(&start, &[false; MOTION_COUNT]);
         let mut iou = f64::NAN;
-        for run in 0..opts.refit_runs.max(1) {
-            // NaN (an infinite cost) never stops it; 1 runs them all, even on a
-            // perfect fit.
-            if run > 0 && opts.refit_again_iou < 1.0 && iou >= opts.refit_again_iou {
-                break;
-            }
+        for _ in 0..opts.refit_runs.max(1) {
             self.hierarchical(
                 &mut ev,
                 &mut best,
@@ -2470,6 +2465,11 @@ impl<'a> Search<'a> {
             } else {
                 f64::NAN
             };
+            // NaN (an infinite cost) never stops it; 1 runs them all, even on a
+            // perfect fit.
+            if opts.refit_again_iou < 1.0 && iou >= opts.refit_again_iou {
+                break;
+            }
         }
         if !best_f.is_finite() {
             return (frame, ev.evals);
