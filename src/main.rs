@@ -216,6 +216,11 @@ struct RefitArgs {
     /// accurate.
     #[arg(long)]
     no_middle_pass: bool,
+    /// One initialisation, from the start shape (by default a second one starts
+    /// from it with a round trunk, and the start that tracks the next 40 frames at
+    /// the lower cost is kept). Faster to start, less accurate.
+    #[arg(long)]
+    one_start: bool,
     /// Where the second pass starts: the best-scoring initial frame among each
     /// block's last this many frames with a person (1 to 150; 1: the last one).
     #[arg(long, default_value_t = 1)]
@@ -250,6 +255,7 @@ impl RefitArgs {
     fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
         track.two_way = !self.one_way;
         track.middle_pass = !self.no_middle_pass;
+        track.round_start = !self.one_start;
         monocap::track::tracker::check_second_pass_window(
             self.second_pass_window,
             "--second-pass-window",

@@ -460,11 +460,13 @@ fn documented_option_limits_are_the_services() {
         default.switch_penalty,
         monocap::track::tracker::SWITCH_PENALTY
     );
-    // The passes after the first: booleans, on by default, off from a query too.
+    // The passes after the first and the second start: booleans, on by default,
+    // off from a query too.
     type On = fn(&monocap::track::tracker::TrackOptions) -> bool;
-    let passes: [(&str, On); 2] = [
+    let passes: [(&str, On); 3] = [
         ("two_way", |t| t.two_way),
         ("middle_pass", |t| t.middle_pass),
+        ("round_start", |t| t.round_start),
     ];
     for (name, on) in passes {
         check(serde_json::json!({ name: true }), true);

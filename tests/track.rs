@@ -963,6 +963,61 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
     assert!(kept > 0 && again > 0, "{kept} kept, {again} again");
 }
 
+/// Two starts (`TrackOptions::round_start`): the tracker initialises from the
+/// start shape and from it with a round trunk, tracks the frames after the initial
+/// one from each, and goes on with the start that tracked them at the lower summed
+/// cost. With the first pass alone and no refit, the frames' costs are the probe's
+/// own, so the result is exactly one of the two single starts' results, the
+/// cheaper one.
+#[test]
+fn of_two_starts_the_cheaper_to_track_is_kept() {
+    let (frames, opts) = run_colour_inputs();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let run = |round_start: bool, start_shape| {
+        let inputs = frames.iter().map(|f| {
+            Ok(FrameInput {
+                silhouette: f.silhouette.clone(),
+                image: f.image.clone(),
+            })
+        });
+        let opts = TrackOptions {
+            round_start,
+            start_shape,
+            init_frame: Some(0),
+            refit_sigma: 0.0,
+            two_way: false,
+            middle_pass: false,
+            ..TrackOptions::default()
+        };
+        Tracker::new(cam.clone(), opts)
+            .track(inputs, Some(frames.len()), |_, _| ControlFlow::Continue(()))
+            .unwrap()
+    };
+    let start = TrackOptions::default().start_shape;
+    let round = monocap::body::parts::round_trunk(&start);
+    let (plain, rounded, both) = (run(false, start), run(false, round), run(true, start));
+    let total = |t: &monocap::track::tracker::Track| -> f64 {
+        t.frames.iter().filter_map(|f| f.cost).sum()
+    };
+    println!(
+        "summed cost from the start shape {:.1}, from the round trunk {:.1}",
+        total(&plain),
+        total(&rounded)
+    );
+    assert_ne!(plain.shape, rounded.shape, "the two starts fit one shape");
+    let cheaper = if total(&rounded) < total(&plain) {
+        &rounded
+    } else {
+        &plain
+    };
+    assert_eq!(both.shape, cheaper.shape);
+    assert_eq!(both.frames.len(), cheaper.frames.len());
+    for (got, want) in both.frames.iter().zip(&cheaper.frames) {
+        assert_eq!(got.pose, want.pose, "frame {}", got.index);
+        assert_eq!(got.cost, want.cost, "frame {}", got.index);
+    }
+}
+
 /// Features computed on helper threads ahead of the search, the initialisation's
 /// fits side by side, and the second pass running beside the first, change
 /// nothing: the same poses, shape and costs, and the same progress reports, as on

@@ -8,7 +8,7 @@
 
 use nalgebra::Vector3;
 
-use super::params::{sx, ShapeValues};
+use super::params::{sx, ShapeValues, SHAPE};
 use super::skeleton::{standard, Joint};
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -44,6 +44,31 @@ pub const PART_COUNT: usize = 26;
 /// The first parts are the trunk's (pelvis, abdomen, chest, shoulders, neck, head);
 /// the arms' and then the legs' follow.
 pub const TRUNK_PARTS: usize = 6;
+
+/// The chest's half-width and half-depth (cm) in the standard body, scaled by
+/// the torso's width and depth.
+const CHEST_RADII: (f64, f64) = (15.5, 10.5);
+/// The pelvis's half-width and half-depth (cm) in the standard body, scaled by the
+/// pelvis's width and the torso's depth.
+const PELVIS_RADII: (f64, f64) = (15.5, 10.5);
+
+/// `shape` with its torso and pelvis narrowed or widened to be as wide as they are
+/// deep (within the values' ranges): a trunk whose outline hardly changes with the
+/// way it faces. The initialisation judges the heading with such a trunk too
+/// ([`crate::track::tracker::TrackOptions::round_start`]): with the trunk's real
+/// width unknown, a wide trunk turned towards the side explains a narrow one seen
+/// from the front.
+pub fn round_trunk(shape: &ShapeValues) -> ShapeValues {
+    let mut out = *shape;
+    let depth = shape[sx::TORSO_DEPTH];
+    for (i, (half_width, half_depth)) in [
+        (sx::TORSO_WIDTH, CHEST_RADII),
+        (sx::PELVIS_WIDTH, PELVIS_RADII),
+    ] {
+        out[i] = (depth * half_depth / half_width).clamp(SHAPE[i].lo, SHAPE[i].hi);
+    }
+    out
+}
 
 /// The parts of a body of shape α.
 pub fn body_parts(shape: &ShapeValues) -> [Part; PART_COUNT] {
@@ -108,9 +133,9 @@ pub fn body_parts(shape: &ShapeValues) -> [Part; PART_COUNT] {
     };
     #[rustfmt::skip]
     let trunk = [
-        part("pelvis",    Joint::Hips,  E, v(0.0, -1.0, 0.0),         v(15.5 * pw, 11.0, 10.5 * td),             Trousers),
+        part("pelvis",    Joint::Hips,  E, v(0.0, -1.0, 0.0),         v(PELVIS_RADII.0 * pw, 11.0, PELVIS_RADII.1 * td), Trousers),
         part("abdomen",   Joint::Spine, C, v(0.0, -8.0 * th, 0.0),    v(13.5 * tw, 0.55 * torso, 9.5 * td),      Shirt),
-        part("chest",     Joint::Spine, C, v(0.0, 0.35 * torso, 0.0), v(15.5 * tw, 0.55 * torso, 10.5 * td),     Shirt),
+        part("chest",     Joint::Spine, C, v(0.0, 0.35 * torso, 0.0), v(CHEST_RADII.0 * tw, 0.55 * torso, CHEST_RADII.1 * td), Shirt),
         part("shoulders", Joint::Spine, E, v(0.0, 0.88 * torso, 0.0), v(18.5 * tw, 6.5, 9.0 * td),               Shirt),
         part("neck",      Joint::Neck,  C, v(0.0, -3.0, 0.0),         v(5.5, standard::NECK * th + 4.0, 6.0),    Skin),
         part("head",      Joint::Head,  E, v(0.0, 10.0 * hd, 1.5 * hd), v(8.0, 11.0, 10.0) * hd,                Skin),
@@ -142,6 +167,31 @@ mod tests {
             );
             assert_eq!(trunk, i < TRUNK_PARTS, "part {i} ({})", p.name);
         }
+    }
+
+    #[test]
+    fn a_round_trunk_is_as_wide_as_it_is_deep_and_keeps_the_rest() {
+        use crate::body::params::{SHAPE, TYPICAL_SHAPE};
+        let part = |parts: &[Part], name: &str| *parts.iter().find(|p| p.name == name).unwrap();
+        for (k, start) in [STANDARD_SHAPE, TYPICAL_SHAPE].into_iter().enumerate() {
+            let round = round_trunk(&start);
+            let parts = body_parts(&round);
+            for name in ["chest", "pelvis"] {
+                let r = part(&parts, name).radii;
+                assert!((r.x - r.z).abs() < 1e-9, "shape {k}: {name} {r:?}");
+            }
+            for i in (0..start.len()).filter(|&i| i != sx::TORSO_WIDTH && i != sx::PELVIS_WIDTH) {
+                assert_eq!(round[i], start[i], "shape {k}: {} changed", SHAPE[i].name);
+            }
+            // The start's trunk was wider than deep.
+            assert!(round[sx::TORSO_WIDTH] < start[sx::TORSO_WIDTH], "shape {k}");
+        }
+        // A trunk too shallow to match within the width's range stops at its bound.
+        let mut shallow = STANDARD_SHAPE;
+        shallow[sx::TORSO_DEPTH] = 0.6;
+        let round = round_trunk(&shallow);
+        assert_eq!(round[sx::TORSO_WIDTH], SHAPE[sx::TORSO_WIDTH].lo);
+        assert_eq!(round[sx::PELVIS_WIDTH], SHAPE[sx::PELVIS_WIDTH].lo);
     }
 
     #[test]

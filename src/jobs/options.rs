@@ -47,6 +47,11 @@ pub struct JobOptions {
     /// fast.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub middle_pass: Option<bool>,
+    /// A second initialisation from the start shape with a round trunk, the start
+    /// that tracks the next 40 frames at the lower cost kept (default true; see
+    /// `TrackOptions::round_start`): more accurate; false starts faster.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub round_start: Option<bool>,
     /// How each frame chooses among the passes' answers, 0 to 1000 (default 0.03;
     /// see `TrackOptions::switch_penalty`): the price of moving from one pass's
     /// track to another's; 0 takes each frame's cheapest answer.
@@ -178,6 +183,9 @@ impl JobOptions {
         }
         if let Some(t) = self.middle_pass {
             o.track.middle_pass = t;
+        }
+        if let Some(t) = self.round_start {
+            o.track.round_start = t;
         }
         if let Some(t) = self.two_way {
             o.track.two_way = t;

@@ -1,5 +1,8 @@
 //! The tracker (method.md §5): initialise on one frame, then fit every frame from
-//! its neighbour's solution with the biased, hierarchical downhill simplex.
+//! its neighbour's solution with the biased, hierarchical downhill simplex. By
+//! default the initial frame is fitted twice, from the start shape and from it
+//! with a round trunk, and the start that tracks the buffered frames after it at
+//! the lower cost goes on ([`TrackOptions::round_start`]).
 //!
 //! Frames arrive as a stream ([`FrameInput`]: the silhouette and, for a colour clip,
 //! the frame, at the working resolution). What is kept, and why:
@@ -8,7 +11,8 @@
 //!   pixel): the frames before it are tracked backwards from it once it is fitted.
 //!   The automatic choice looks at most [`TrackOptions::init_window`] frames with a
 //!   person, so this buffer is bounded; a user-chosen initial frame must lie within
-//!   the first [`MAX_INIT_FRAME`] frames;
+//!   the first [`MAX_INIT_FRAME`] frames, and with two starts the
+//!   [`START_PROBE_FRAMES`] frames after it are read before it is fitted;
 //! - after that, only the previous frame's features (temporal coherence of the
 //!   extremity candidates) and one pose per frame;
 //! - with the second pass ([`TrackOptions::two_way`]), the targets of the block
@@ -59,6 +63,7 @@ use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
     SHAPE_COUNT, TYPICAL_SHAPE,
 };
+use crate::body::parts::round_trunk;
 use crate::body::skeleton::{standard_rest, Tip};
 use crate::body::{Body, Camera, Mask};
 use crate::vision::features::{link, FeatureOptions, FrameFeatures};
@@ -73,6 +78,10 @@ const MAX_RESIZE: f64 = 1.25;
 
 /// Frames tracked from each initial candidate to choose between them.
 const HYPOTHESIS_FRAMES: usize = 15;
+
+/// Frames tracked from each initialisation's start to choose between the
+/// initialisations ([`TrackOptions::round_start`]).
+const START_PROBE_FRAMES: usize = 40;
 
 /// Frames either side of the initial frame that measure the person's travel
 /// ([`ground_travel`]).
@@ -450,6 +459,17 @@ pub struct TrackOptions {
     /// says little about proportions: the fit mostly keeps the lengths it starts
     /// from (README, "The typical performer").
     pub start_shape: ShapeValues,
+    /// Initialise a second time from [`TrackOptions::start_shape`] with a round
+    /// trunk ([`round_trunk`]: its torso and pelvis as wide as they are deep), and
+    /// keep whichever start, shape and pose, tracks the next
+    /// [`START_PROBE_FRAMES`] frames at the lower summed cost (true by default). A
+    /// standing person's heading and trunk width trade against each other in one
+    /// silhouette: a wide trunk turned to the side explains a narrow one seen from
+    /// the front, and the initialisation settles on the heading its start shape's
+    /// trunk suggests; a round trunk leaves the heading to the limbs. The frames
+    /// that follow tell the two apart better than the initial frame does (README,
+    /// "Two starts, a round trunk and the start shape's").
+    pub round_start: bool,
     /// Evaluations of the initialisation's joint fit (8,000 by default; 0 for
     /// none): after the simplex has fitted the shape and the pose in turn, CMA-ES
     /// over the 12 shape values and the 30 pose values at once, under the
@@ -515,6 +535,7 @@ impl Default for TrackOptions {
             initial: None,
             known_shape: None,
             start_shape: TYPICAL_SHAPE,
+            round_start: true,
             init_joint_evals: INIT_JOINT_EVALS,
             pose_prior: Some(PosePrior::builtin()),
             stop: None,
@@ -735,9 +756,13 @@ impl Tracker {
         let mut pending: Vec<Pending> = Vec::new();
         let mut person_frames = 0;
         let mut exhausted = false;
+        // Two starts track the frames after the initial one to choose between them.
+        let two_starts =
+            self.opts.round_start && self.opts.known_shape.is_none() && self.opts.initial.is_none();
+        let probed = if two_starts { START_PROBE_FRAMES } else { 0 };
         loop {
             let enough = match self.opts.init_frame {
-                Some(f) => pending.len() > f,
+                Some(f) => pending.len() > f + probed,
                 // Enough people seen; or a bounded wait for one to stay a while.
                 None => {
                     person_frames >= self.opts.init_window.max(1)
@@ -796,18 +821,29 @@ impl Tracker {
         // paper's objective (with its rewards, [`Weights::track_rewards`]), but for
         // the initialisation's joint fit of shape and pose, which judges by the
         // tracking objective ([`Tracker::initialise`]).
-        let (shape, candidates) = match self.opts.initial {
-            Some((shape, pose)) => (shape, vec![pose]),
-            None => self.initialise(init_target),
+        // One start, or two: from the start shape and from it with a round trunk
+        // ([`TrackOptions::round_start`]).
+        let starts: Vec<(ShapeValues, Vec<Pose>)> = match self.opts.initial {
+            Some((shape, pose)) => vec![(shape, vec![pose])],
+            None => {
+                let mut starts = vec![self.initialise(init_target)];
+                if two_starts {
+                    let round = round_trunk(&self.opts.start_shape);
+                    starts.push(self.initialise_with(init_target, None, &round));
+                }
+                starts
+            }
         };
         // Initialisation gives up early when asked to stop; its result is then moot.
         self.check_stop()?;
-        let body = Body::new(&shape);
-        // The clip's skin colour, from the initialisation's best fit (before the
-        // next frames choose between the candidates, which they do with it);
+        // The clip's skin colour, from the (first) initialisation's best fit (before
+        // the next frames choose between the candidates, which they do with it);
         // every frame's target rewards the bare parts for covering it from now on.
         let skin = (self.opts.weights.skin > 0.0)
-            .then(|| learn_skin(&body, &self.camera, init_target, &candidates[0]))
+            .then(|| {
+                let (shape, candidates) = &starts[0];
+                learn_skin(&Body::new(shape), &self.camera, init_target, &candidates[0])
+            })
             .flatten();
         if let Some(m) = &skin {
             for t in pending.iter_mut().filter_map(|p| p.target.as_mut()) {
@@ -815,21 +851,37 @@ impl Tracker {
             }
         }
         let init_target = pending[init].target.as_ref().expect("a person frame");
+        let targets: Vec<Option<&Target>> = pending.iter().map(|p| p.target.as_ref()).collect();
         // Several candidates: keep the one that explains the next frames best (a
         // near tie goes to the one facing the camera, [`choose_hypothesis`]).
-        let init_pose = if candidates.len() == 1 {
-            candidates[0]
-        } else {
-            let targets: Vec<Option<&Target>> = pending.iter().map(|p| p.target.as_ref()).collect();
-            let (totals, evals) = self.probe_candidates(&body, &candidates, &targets, 0, init)?;
-            timing.evals += evals;
-            let (chosen, evals) = self.choose_initial(&body, init_target, &totals, &targets, init);
-            timing.evals += evals;
-            match totals.iter().find(|(_, p)| *p != chosen) {
-                Some((_, other)) if self.opts.other_candidate => *other,
-                _ => chosen,
+        let mut chosen: Vec<(ShapeValues, Pose)> = Vec::with_capacity(starts.len());
+        for (shape, candidates) in &starts {
+            let body = Body::new(shape);
+            let pose = if candidates.len() == 1 {
+                candidates[0]
+            } else {
+                let (totals, evals) =
+                    self.probe_candidates(&body, candidates, &targets, 0, init)?;
+                timing.evals += evals;
+                let (chosen, evals) =
+                    self.choose_initial(&body, init_target, &totals, &targets, init);
+                timing.evals += evals;
+                match totals.iter().find(|(_, p)| *p != chosen) {
+                    Some((_, other)) if self.opts.other_candidate => *other,
+                    _ => chosen,
+                }
+            };
+            chosen.push((*shape, pose));
+        }
+        let (shape, init_pose) = match chosen[..] {
+            [one] => one,
+            _ => {
+                let (best, evals) = self.probe_starts(&chosen, &targets, init)?;
+                timing.evals += evals;
+                best
             }
         };
+        let body = Body::new(&shape);
         let (mut search, init_frame) = self.start_on(&body, init, init_target, init_pose);
         let (ground, init_pose) = (search.ground, init_frame.pose);
         let mut results: Vec<Option<TrackedFrame>> = vec![None; init + 1];
@@ -1118,7 +1170,8 @@ impl Tracker {
             BlockStart::Middle => people[(people.len() - 1) / 2],
         };
         let init_target = targets[init].as_deref().expect("a person frame");
-        let (_, candidates) = self.initialise_with(init_target, Some(shape));
+        let (_, candidates) =
+            self.initialise_with(init_target, Some(shape), &self.opts.start_shape);
         check()?;
         let mut evals = 0;
         let init_pose = if candidates.len() == 1 {
@@ -1219,6 +1272,52 @@ impl Tracker {
         Ok((totals, evals))
     }
 
+    /// The start, shape and initial pose, among `starts` (one per initialisation,
+    /// [`TrackOptions::round_start`]) that tracks the [`START_PROBE_FRAMES`] frames
+    /// after the initial frame `init` (those before it when the clip ends first)
+    /// at the lowest summed cost, the initial frame's included; and the
+    /// evaluations spent. The frames are tracked as the first pass tracks them,
+    /// under the tracking objective; `targets` holds the targets of the frames
+    /// from the first (None without a person).
+    fn probe_starts(
+        &self,
+        starts: &[(ShapeValues, Pose)],
+        targets: &[Option<&Target>],
+        init: usize,
+    ) -> Result<((ShapeValues, Pose), u64), TrackError> {
+        let after: Vec<usize> = (init + 1..targets.len()).take(START_PROBE_FRAMES).collect();
+        let before: Vec<usize> = (0..init)
+            .rev()
+            .take(START_PROBE_FRAMES - after.len())
+            .collect();
+        let init_target = targets[init].expect("a person frame");
+        // Each start's probe is independent of the others': side by side.
+        let probed: Vec<Result<(f64, u64), TrackError>> =
+            par_map(starts, self.threads(), |(shape, pose)| {
+                let body = Body::new(shape);
+                let (mut search, frame) = self.start_on(&body, init, init_target, *pose);
+                let mut total = frame.cost.unwrap_or(0.0);
+                for run in [&after, &before] {
+                    let mut history = History::new(frame.pose);
+                    for &i in run.iter() {
+                        self.check_stop()?;
+                        total += search.step(i, targets[i], &mut history).cost.unwrap_or(0.0);
+                    }
+                }
+                Ok((total, search.evals))
+            });
+        let mut best: Option<(f64, (ShapeValues, Pose))> = None;
+        let mut evals = 0;
+        for (start, probed) in starts.iter().zip(probed) {
+            let (total, e) = probed?;
+            evals += e;
+            if best.as_ref().is_none_or(|(b, _)| total < *b) {
+                best = Some((total, *start));
+            }
+        }
+        Ok((best.map(|(_, s)| s).unwrap_or(starts[0]), evals))
+    }
+
     /// The initial pose among the probed candidates (each with its summed cost over
     /// the probe frames) and the evaluations spent choosing: [`choose_hypothesis`],
     /// unless the person travels. People walk and run forwards, so a travelling
@@ -1291,14 +1390,16 @@ impl Tracker {
     /// frames that follow tell them apart). Returns early, with a meaningless
     /// result, when [`TrackOptions::stop`] is set.
     pub fn initialise(&self, target: &Target) -> (ShapeValues, Vec<Pose>) {
-        self.initialise_with(target, self.opts.known_shape)
+        self.initialise_with(target, self.opts.known_shape, &self.opts.start_shape)
     }
 
-    /// [`Tracker::initialise`], with the shape `known` when it is given.
+    /// [`Tracker::initialise`], with the shape `known` when it is given, placing,
+    /// posing and fitting from `start` rather than [`TrackOptions::start_shape`].
     fn initialise_with(
         &self,
         target: &Target,
         known: Option<ShapeValues>,
+        start_shape: &ShapeValues,
     ) -> (ShapeValues, Vec<Pose>) {
         let plain = target;
         let paper = plain.paper();
@@ -1306,7 +1407,7 @@ impl Tracker {
         let cam = &self.camera;
         let bbox = mask_bbox(&target.silhouette).expect("a person");
         let (_, rest) = standard_rest();
-        let start = Body::new(&self.opts.start_shape);
+        let start = Body::new(start_shape);
         let posed = start.posed(&rest);
         let top = posed.tips[Tip::HeadTop as usize].y;
         let sole = sole_height(&start, &posed);
@@ -1361,7 +1462,7 @@ impl Tracker {
 
         // A known shape: the pose alone is fitted again, with its body; otherwise
         // the shape with the root translation, alternating with the pose.
-        let mut shape = known.unwrap_or(self.opts.start_shape);
+        let mut shape = known.unwrap_or(*start_shape);
         let rounds = if known.is_some() {
             let body = Body::new(&shape);
             pose = Search::initial(self, &body).fit_wide(target, pose, 3).0;
