@@ -14,7 +14,7 @@ use monocap::motion::bvh::Bvh;
 use monocap::motion::json::MotionJson;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
 use monocap::track::metrics;
-use monocap::track::tracker::{FrameInput, TrackOptions, TrackedFrame, Tracker};
+use monocap::track::tracker::{FrameInput, Track, TrackOptions, TrackedFrame, Tracker};
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
 
@@ -859,6 +859,19 @@ fn run_colour_inputs() -> (Vec<FrameInput>, SynthOptions) {
     (frames, opts)
 }
 
+/// `frames` (copies of them) tracked with `opts`.
+fn track_copies(cam: &Camera, frames: &[FrameInput], opts: TrackOptions) -> Track {
+    let inputs = frames.iter().map(|f| {
+        Ok(FrameInput {
+            silhouette: f.silhouette.clone(),
+            image: f.image.clone(),
+        })
+    });
+    Tracker::new(cam.clone(), opts)
+        .track(inputs, Some(frames.len()), |_, _| ControlFlow::Continue(()))
+        .unwrap()
+}
+
 /// The smoothed refit searches every frame again from the average of its
 /// neighbours' poses: the poses change (with it off, the first pass's answers
 /// stand), the initialisation does not, and the model still covers the person as
@@ -868,24 +881,11 @@ fn the_smoothed_refit_searches_every_frame_again() {
     let (frames, opts) = run_colour_inputs();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let run = |refit_sigma: f64| {
-        let inputs: Vec<FrameInput> = frames
-            .iter()
-            .map(|f| FrameInput {
-                silhouette: f.silhouette.clone(),
-                image: f.image.clone(),
-            })
-            .collect();
-        Tracker::new(
-            cam.clone(),
-            TrackOptions {
-                refit_sigma,
-                ..TrackOptions::default()
-            },
-        )
-        .track(inputs.into_iter().map(Ok), Some(frames.len()), |_, _| {
-            ControlFlow::Continue(())
-        })
-        .unwrap()
+        let opts = TrackOptions {
+            refit_sigma,
+            ..TrackOptions::default()
+        };
+        track_copies(&cam, &frames, opts)
     };
     let (off, on) = (run(0.0), run(1.5));
     assert_eq!(on.shape, off.shape);
@@ -896,9 +896,8 @@ fn the_smoothed_refit_searches_every_frame_again() {
         .zip(&off.frames)
         .filter(|(a, b)| a.pose != b.pose)
         .count();
-    let mean_iou = |t: &monocap::track::tracker::Track| {
-        t.frames.iter().filter_map(|f| f.iou).sum::<f64>() / t.frames.len() as f64
-    };
+    let mean_iou =
+        |t: &Track| t.frames.iter().filter_map(|f| f.iou).sum::<f64>() / t.frames.len() as f64;
     let (iou_off, iou_on) = (mean_iou(&off), mean_iou(&on));
     println!(
         "refit: {changed} of {} frames changed, mean IoU {iou_off:.3} -> {iou_on:.3}",
@@ -917,12 +916,6 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
     let (frames, opts) = run_colour_inputs();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let run = |refit_runs: usize, refit_again_iou: f64| {
-        let inputs = frames.iter().map(|f| {
-            Ok(FrameInput {
-                silhouette: f.silhouette.clone(),
-                image: f.image.clone(),
-            })
-        });
         let opts = TrackOptions {
             refit_runs,
             refit_again_iou,
@@ -930,9 +923,7 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
             middle_pass: false,
             ..TrackOptions::default()
         };
-        Tracker::new(cam.clone(), opts)
-            .track(inputs, Some(frames.len()), |_, _| ControlFlow::Continue(()))
-            .unwrap()
+        track_copies(&cam, &frames, opts)
     };
     let once = run(1, 0.0);
     let mut ious: Vec<f64> = once.frames.iter().filter_map(|f| f.iou).collect();
@@ -974,12 +965,6 @@ fn of_two_starts_the_cheaper_to_track_is_kept() {
     let (frames, opts) = run_colour_inputs();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let run = |round_start: bool, start_shape| {
-        let inputs = frames.iter().map(|f| {
-            Ok(FrameInput {
-                silhouette: f.silhouette.clone(),
-                image: f.image.clone(),
-            })
-        });
         let opts = TrackOptions {
             round_start,
             start_shape,
@@ -989,16 +974,12 @@ fn of_two_starts_the_cheaper_to_track_is_kept() {
             middle_pass: false,
             ..TrackOptions::default()
         };
-        Tracker::new(cam.clone(), opts)
-            .track(inputs, Some(frames.len()), |_, _| ControlFlow::Continue(()))
-            .unwrap()
+        track_copies(&cam, &frames, opts)
     };
     let start = TrackOptions::default().start_shape;
     let round = monocap::body::parts::round_trunk(&start);
     let (plain, rounded, both) = (run(false, start), run(false, round), run(true, start));
-    let total = |t: &monocap::track::tracker::Track| -> f64 {
-        t.frames.iter().filter_map(|f| f.cost).sum()
-    };
+    let total = |t: &Track| -> f64 { t.frames.iter().filter_map(|f| f.cost).sum() };
     println!(
         "summed cost from the start shape {:.1}, from the round trunk {:.1}",
         total(&plain),
