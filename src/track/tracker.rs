@@ -1394,7 +1394,7 @@ impl Tracker {
     }
 
     /// [`Tracker::initialise`], with the shape `known` when it is given, placing,
-    /// posing and fitting from `start` rather than [`TrackOptions::start_shape`].
+    /// posing and fitting from `start_shape` rather than [`TrackOptions::start_shape`].
     fn initialise_with(
         &self,
         target: &Target,
