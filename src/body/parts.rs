@@ -171,7 +171,7 @@ mod tests {
 
     #[test]
     fn a_round_trunk_is_as_wide_as_it_is_deep_and_keeps_the_rest() {
-        use crate::body::params::{SHAPE, TYPICAL_SHAPE};
+        use crate::body::params::TYPICAL_SHAPE;
         let part = |parts: &[Part], name: &str| *parts.iter().find(|p| p.name == name).unwrap();
         for (k, start) in [STANDARD_SHAPE, TYPICAL_SHAPE].into_iter().enumerate() {
             let round = round_trunk(&start);

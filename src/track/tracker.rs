@@ -1232,11 +1232,7 @@ impl Tracker {
         from: usize,
         init: usize,
     ) -> Result<(Vec<(f64, Pose)>, u64), TrackError> {
-        let after: Vec<usize> = (init + 1..targets.len()).take(HYPOTHESIS_FRAMES).collect();
-        let before: Vec<usize> = (0..init)
-            .rev()
-            .take(HYPOTHESIS_FRAMES - after.len())
-            .collect();
+        let (after, before) = probe_frames(targets.len(), init, HYPOTHESIS_FRAMES);
         // These frames' targets under the paper's objective, made once for all the
         // candidates (none without a reward rim).
         let paper: Vec<Option<Target>> = (0..targets.len())
@@ -1285,11 +1281,7 @@ impl Tracker {
         targets: &[Option<&Target>],
         init: usize,
     ) -> Result<((ShapeValues, Pose), u64), TrackError> {
-        let after: Vec<usize> = (init + 1..targets.len()).take(START_PROBE_FRAMES).collect();
-        let before: Vec<usize> = (0..init)
-            .rev()
-            .take(START_PROBE_FRAMES - after.len())
-            .collect();
+        let (after, before) = probe_frames(targets.len(), init, START_PROBE_FRAMES);
         let init_target = targets[init].expect("a person frame");
         // Each start's probe is independent of the others': side by side.
         let probed: Vec<Result<(f64, u64), TrackError>> =
@@ -1787,6 +1779,14 @@ fn init_score(f: &FrameFeatures) -> f64 {
     }
     // Among equals, a larger person (nearer, better resolved) wins slightly.
     s + 1e-4 * f.body_height
+}
+
+/// The `n` frames a probe from frame `init` tracks, of `len`: those after it in
+/// order, then, where the clip ends first, those before it, backwards.
+fn probe_frames(len: usize, init: usize, n: usize) -> (Vec<usize>, Vec<usize>) {
+    let after: Vec<usize> = (init + 1..len).take(n).collect();
+    let before: Vec<usize> = (0..init).rev().take(n - after.len()).collect();
+    (after, before)
 }
 
 /// The smoothed refit's runner: the frames' [`Window`], and a helper thread that
