@@ -873,12 +873,12 @@ impl Tracker {
             };
             chosen.push((*shape, pose));
         }
-        let (shape, init_pose) = match chosen[..] {
-            [one] => one,
+        let ((shape, init_pose), mut probed) = match chosen[..] {
+            [one] => (one, Probed::new()),
             _ => {
-                let (best, evals) = self.probe_starts(&chosen, &targets, init)?;
+                let (best, probed, evals) = self.probe_starts(&chosen, &targets, init)?;
                 timing.evals += evals;
-                best
+                (best, probed)
             }
         };
         let body = Body::new(&shape);
@@ -962,8 +962,14 @@ impl Tracker {
             let mut searched = 0.0;
             // Frames are reported behind the search (those before the initial frame
             // after it has gone back to the first): a stop is looked for here too.
+            // The frames the winning start's probe tracked are taken as they are: the
+            // first pass would track them the same way.
             let mut step = |i: usize, target: Option<&Target>, history: &mut History| {
                 self.check_stop()?;
+                if let Some((f, after)) = probed.remove(&i) {
+                    *history = after;
+                    return Ok(f);
+                }
                 let t0 = Instant::now();
                 let f = search.step(i, target, history);
                 searched += t0.elapsed().as_secs_f64();
@@ -1271,43 +1277,49 @@ impl Tracker {
     /// The start, shape and initial pose, among `starts` (one per initialisation,
     /// [`TrackOptions::round_start`]) that tracks the [`START_PROBE_FRAMES`] frames
     /// after the initial frame `init` (those before it when the clip ends first)
-    /// at the lowest summed cost, the initial frame's included; and the
-    /// evaluations spent. The frames are tracked as the first pass tracks them,
-    /// under the tracking objective; `targets` holds the targets of the frames
-    /// from the first (None without a person).
+    /// at the lowest summed cost, the initial frame's included; its tracked frames;
+    /// and the evaluations spent. The frames are tracked as the first pass tracks
+    /// them (from the initial frame on, forwards, then backwards), under the
+    /// tracking objective, so the first pass takes the winner's as they are;
+    /// `targets` holds the targets of the frames from the first (None without a
+    /// person).
     fn probe_starts(
         &self,
         starts: &[(ShapeValues, Pose)],
         targets: &[Option<&Target>],
         init: usize,
-    ) -> Result<((ShapeValues, Pose), u64), TrackError> {
+    ) -> Result<((ShapeValues, Pose), Probed, u64), TrackError> {
         let (after, before) = probe_frames(targets.len(), init, START_PROBE_FRAMES);
         let init_target = targets[init].expect("a person frame");
         // Each start's probe is independent of the others': side by side.
-        let probed: Vec<Result<(f64, u64), TrackError>> =
+        let probed: Vec<Result<(f64, Probed, u64), TrackError>> =
             par_map(starts, self.threads(), |(shape, pose)| {
                 let body = Body::new(shape);
                 let (mut search, frame) = self.start_on(&body, init, init_target, *pose);
                 let mut total = frame.cost.unwrap_or(0.0);
+                let mut tracked = Probed::new();
                 for run in [&after, &before] {
                     let mut history = History::new(frame.pose);
                     for &i in run.iter() {
                         self.check_stop()?;
-                        total += search.step(i, targets[i], &mut history).cost.unwrap_or(0.0);
+                        let f = search.step(i, targets[i], &mut history);
+                        total += f.cost.unwrap_or(0.0);
+                        tracked.insert(i, (f, history.clone()));
                     }
                 }
-                Ok((total, search.evals))
+                Ok((total, tracked, search.evals))
             });
-        let mut best: Option<(f64, (ShapeValues, Pose))> = None;
+        let mut best: Option<(f64, (ShapeValues, Pose), Probed)> = None;
         let mut evals = 0;
         for (start, probed) in starts.iter().zip(probed) {
-            let (total, e) = probed?;
+            let (total, tracked, e) = probed?;
             evals += e;
-            if best.as_ref().is_none_or(|(b, _)| total < *b) {
-                best = Some((total, *start));
+            if best.as_ref().is_none_or(|(b, _, _)| total < *b) {
+                best = Some((total, *start, tracked));
             }
         }
-        Ok((best.map(|(_, s)| s).unwrap_or(starts[0]), evals))
+        let (start, tracked) = best.map_or((starts[0], Probed::new()), |(_, s, t)| (s, t));
+        Ok((start, tracked, evals))
     }
 
     /// The initial pose among the probed candidates (each with its summed cost over
@@ -1780,6 +1792,9 @@ fn init_score(f: &FrameFeatures) -> f64 {
     // Among equals, a larger person (nearer, better resolved) wins slightly.
     s + 1e-4 * f.body_height
 }
+
+/// The frames a probe tracked, each with the history its tracking left.
+type Probed = std::collections::HashMap<usize, (TrackedFrame, History)>;
 
 /// The `n` frames a probe from frame `init` tracks, of `len`: those after it in
 /// order, then, where the clip ends first, those before it, backwards.
@@ -2255,6 +2270,7 @@ fn cost_spike(recent: &VecDeque<f64>, cost: f64, k: f64) -> bool {
 }
 
 /// The previous solutions a frame's prediction is made from.
+#[derive(Clone)]
 struct History {
     last: Pose,
     before: Option<Pose>,
