@@ -962,7 +962,9 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
 /// one from each, and goes on with the start that tracked them at the lower summed
 /// cost. With the first pass alone and no refit, the frames' costs are the probe's
 /// own, so the result is exactly one of the two single starts' results, the
-/// cheaper one.
+/// cheaper one. The probe covers this short clip, and the first pass takes the
+/// winner's frames as the probe tracked them: the run spends exactly the two
+/// single starts' evaluations together.
 #[test]
 fn of_two_starts_the_cheaper_to_track_is_kept() {
     let (frames, opts) = run_colour_inputs();
@@ -971,7 +973,7 @@ fn of_two_starts_the_cheaper_to_track_is_kept() {
         let opts = TrackOptions {
             round_start,
             start_shape,
-            init_frame: Some(0),
+            init_frame: None,
             refit_sigma: 0.0,
             two_way: false,
             middle_pass: false,
@@ -1000,6 +1002,11 @@ fn of_two_starts_the_cheaper_to_track_is_kept() {
         assert_eq!(got.pose, want.pose, "frame {}", got.index);
         assert_eq!(got.cost, want.cost, "frame {}", got.index);
     }
+    assert_eq!(
+        both.timing.evals,
+        plain.timing.evals + rounded.timing.evals,
+        "the winning start's frames were tracked again"
+    );
 }
 
 /// Features computed on helper threads ahead of the search, the initialisation's
