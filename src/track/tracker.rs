@@ -759,10 +759,10 @@ impl Tracker {
         // Two starts track the frames after the initial one to choose between them.
         let two_starts =
             self.opts.round_start && self.opts.known_shape.is_none() && self.opts.initial.is_none();
-        let probed = if two_starts { START_PROBE_FRAMES } else { 0 };
+        let probe_len = if two_starts { START_PROBE_FRAMES } else { 0 };
         loop {
             let enough = match self.opts.init_frame {
-                Some(f) => pending.len() > f + probed,
+                Some(f) => pending.len() > f + probe_len,
                 // Enough people seen; or a bounded wait for one to stay a while.
                 None => {
                     person_frames >= self.opts.init_window.max(1)
@@ -854,7 +854,7 @@ impl Tracker {
         let targets: Vec<Option<&Target>> = pending.iter().map(|p| p.target.as_ref()).collect();
         // Several candidates: keep the one that explains the next frames best (a
         // near tie goes to the one facing the camera, [`choose_hypothesis`]).
-        let mut chosen: Vec<(ShapeValues, Pose)> = Vec::with_capacity(starts.len());
+        let mut picked: Vec<(ShapeValues, Pose)> = Vec::with_capacity(starts.len());
         for (shape, candidates) in &starts {
             let body = Body::new(shape);
             let pose = if candidates.len() == 1 {
@@ -871,12 +871,12 @@ impl Tracker {
                     _ => chosen,
                 }
             };
-            chosen.push((*shape, pose));
+            picked.push((*shape, pose));
         }
-        let ((shape, init_pose), mut probed) = match chosen[..] {
+        let ((shape, init_pose), mut probed) = match picked[..] {
             [one] => (one, Probed::new()),
             _ => {
-                let (best, probed, evals) = self.probe_starts(&chosen, &targets, init)?;
+                let (best, probed, evals) = self.probe_starts(&picked, &targets, init)?;
                 timing.evals += evals;
                 (best, probed)
             }
