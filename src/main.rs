@@ -221,6 +221,12 @@ struct RefitArgs {
     /// the lower cost is kept). Faster to start, less accurate.
     #[arg(long)]
     one_start: bool,
+    /// Fit each of the initialisation's headings from the rest pose alone (by
+    /// default also from the pose prior's exemplar, a typical captured whole pose,
+    /// that costs least there, the cheaper fit kept). Faster to start, less
+    /// accurate.
+    #[arg(long)]
+    no_exemplar_starts: bool,
     /// Where the second pass starts: the best-scoring initial frame among each
     /// block's last this many frames with a person (1 to 150; 1: the last one).
     #[arg(long, default_value_t = 1)]
@@ -256,6 +262,7 @@ impl RefitArgs {
         track.two_way = !self.one_way;
         track.middle_pass = !self.no_middle_pass;
         track.round_start = !self.one_start;
+        track.exemplar_starts = !self.no_exemplar_starts;
         monocap::track::tracker::check_second_pass_window(
             self.second_pass_window,
             "--second-pass-window",

@@ -52,6 +52,11 @@ pub struct JobOptions {
     /// `TrackOptions::round_start`): more accurate; false starts faster.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub round_start: Option<bool>,
+    /// Each of the initialisation's headings also fitted from the pose prior's
+    /// cheapest exemplar, a typical captured whole pose (default true; see
+    /// `TrackOptions::exemplar_starts`): more accurate; false starts faster.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub exemplar_starts: Option<bool>,
     /// How each frame chooses among the passes' answers, 0 to 1000 (default 0.03;
     /// see `TrackOptions::switch_penalty`): the price of moving from one pass's
     /// track to another's; 0 takes each frame's cheapest answer.
@@ -186,6 +191,9 @@ impl JobOptions {
         }
         if let Some(t) = self.round_start {
             o.track.round_start = t;
+        }
+        if let Some(t) = self.exemplar_starts {
+            o.track.exemplar_starts = t;
         }
         if let Some(t) = self.two_way {
             o.track.two_way = t;

@@ -18,6 +18,10 @@
 //! prior (`pose_prior.json` next to this file) was learned from the captures in
 //! `../shared/data/mocap` (README, "The pose prior").
 //!
+//! The prior also keeps 32 exemplars, typical whole poses among the captured ones
+//! (the medoids of k-means clusters of the same poses), which the initialisation
+//! tries as starting points beside the rest pose.
+//!
 //! The same captures give the shape the initialisation starts from
 //! ([`typical_shape`], [`crate::body::params::TYPICAL_SHAPE`]).
 
@@ -61,6 +65,9 @@ const MIN_VARIANCE: f64 = 9.0;
 /// not outweigh the others.
 const POSES_PER_CAPTURE: usize = 400;
 
+/// Exemplars kept ([`PosePrior::exemplar_poses`]).
+const EXEMPLARS: usize = 32;
+
 /// ν of the robust cost: about the number of parameters weighed, so a usual pose
 /// (d² ≈ ν) sits where the cost begins to flatten.
 const NU: f64 = PRIOR_DIMS as f64;
@@ -73,6 +80,9 @@ pub struct PosePrior {
     precision: [[f64; PRIOR_DIMS]; PRIOR_DIMS],
     /// Where it was learned (file names), for the record.
     sources: Vec<String>,
+    /// Typical whole poses among the captured ones, over [`PRIOR_PARAMS`]
+    /// ([`medoids`]).
+    exemplars: Vec<[f64; PRIOR_DIMS]>,
 }
 
 /// The prior at a base pose, for poses that move a few of its parameters
@@ -107,6 +117,9 @@ struct PriorFile {
     mean: Vec<f64>,
     precision: Vec<Vec<f64>>,
     sources: Vec<String>,
+    /// Typical whole poses, each over `params` (absent from older files).
+    #[serde(default)]
+    exemplars: Vec<Vec<f64>>,
 }
 
 impl PosePrior {
@@ -141,6 +154,7 @@ impl PosePrior {
         for i in 0..PRIOR_DIMS {
             cov[(i, i)] += MIN_VARIANCE;
         }
+        let sd: Vec<f64> = (0..PRIOR_DIMS).map(|i| cov[(i, i)].sqrt()).collect();
         let inv = cov
             .cholesky()
             .context("the captured poses' covariance is not positive definite")?
@@ -151,10 +165,12 @@ impl PosePrior {
                 *v = inv[(i, j)];
             }
         }
+        let exemplars = medoids(&samples, &sd, EXEMPLARS);
         Ok(PosePrior {
             mean,
             precision,
             sources: captures.iter().map(|c| c.name.clone()).collect(),
+            exemplars,
         })
     }
 
@@ -168,6 +184,28 @@ impl PosePrior {
                 Arc::new(p)
             })
             .clone()
+    }
+
+    /// The exemplars: typical whole poses of the captures, over [`PRIOR_PARAMS`]
+    /// (none in a file written before they were added).
+    pub fn exemplars(&self) -> &[[f64; PRIOR_DIMS]] {
+        &self.exemplars
+    }
+
+    /// `base` with the weighed angles of each exemplar in turn (its root position
+    /// and heading kept): starting points for a search that the rest pose is too
+    /// far from ([`crate::track::tracker::TrackOptions::exemplar_starts`]).
+    pub fn exemplar_poses(&self, base: &Pose) -> Vec<Pose> {
+        self.exemplars
+            .iter()
+            .map(|e| {
+                let mut p = *base;
+                for (&i, v) in PRIOR_PARAMS.iter().zip(e) {
+                    p[i] = *v;
+                }
+                p
+            })
+            .collect()
     }
 
     /// The captures it was learned from.
@@ -270,6 +308,21 @@ impl PosePrior {
                 .all(|v| v.is_finite()),
             "mean and precision: expected finite numbers"
         );
+        ensure!(
+            f.exemplars
+                .iter()
+                .all(|e| e.len() == PRIOR_DIMS && e.iter().all(|v| v.is_finite())),
+            "exemplars: expected poses of {PRIOR_DIMS} finite values"
+        );
+        let exemplars = f
+            .exemplars
+            .iter()
+            .map(|e| {
+                let mut x = [0.0; PRIOR_DIMS];
+                x.copy_from_slice(e);
+                x
+            })
+            .collect();
         let mut mean = [0.0; PRIOR_DIMS];
         mean.copy_from_slice(&f.mean);
         let mut precision = [[0.0; PRIOR_DIMS]; PRIOR_DIMS];
@@ -280,6 +333,7 @@ impl PosePrior {
             mean,
             precision,
             sources: f.sources,
+            exemplars,
         };
         // A precision that is not positive definite would reward some poses
         // without bound.
@@ -302,6 +356,7 @@ impl PosePrior {
             mean: self.mean.to_vec(),
             precision: self.precision.iter().map(|r| r.to_vec()).collect(),
             sources: self.sources.clone(),
+            exemplars: self.exemplars.iter().map(|e| e.to_vec()).collect(),
         };
         let text = serde_json::to_string_pretty(&f)?;
         std::fs::write(path, text + "\n").with_context(|| format!("writing {}", path.display()))
@@ -406,6 +461,82 @@ pub fn captures_in(dir: &Path) -> Result<Vec<Capture>> {
                 .to_string();
             let bvh = Bvh::read(f).with_context(|| format!("reading {}", f.display()))?;
             capture(&bvh, &name).with_context(|| format!("posing {name}"))
+        })
+        .collect()
+}
+
+/// Medoids of `k` clusters of `samples`: k-means (30 rounds of Lloyd's, from a
+/// k-means++ start drawn with a fixed seed, so the same captures give the same
+/// exemplars), each angle measured in units of its standard deviation `sd`; each
+/// cluster is represented by its member nearest the centre, a pose that was
+/// captured rather than an average of several.
+fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRIOR_DIMS]> {
+    use rand::{RngExt, SeedableRng};
+    if samples.is_empty() || k == 0 {
+        return Vec::new();
+    }
+    let z: Vec<[f64; PRIOR_DIMS]> = samples
+        .iter()
+        .map(|s| {
+            let mut o = [0.0; PRIOR_DIMS];
+            for i in 0..PRIOR_DIMS {
+                o[i] = s[i] / sd[i];
+            }
+            o
+        })
+        .collect();
+    let d2 = |a: &[f64; PRIOR_DIMS], b: &[f64; PRIOR_DIMS]| -> f64 {
+        a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+    let mut centres: Vec<[f64; PRIOR_DIMS]> = vec![z[rng.random_range(0..z.len())]];
+    let mut near: Vec<f64> = z.iter().map(|x| d2(x, &centres[0])).collect();
+    while centres.len() < k.min(z.len()) {
+        let total: f64 = near.iter().sum();
+        let mut r = rng.random_range(0.0..total.max(1e-12));
+        let mut pick = z.len() - 1;
+        for (i, d) in near.iter().enumerate() {
+            if r < *d {
+                pick = i;
+                break;
+            }
+            r -= d;
+        }
+        centres.push(z[pick]);
+        for (n, x) in near.iter_mut().zip(&z) {
+            *n = n.min(d2(x, &z[pick]));
+        }
+    }
+    let mut assign = vec![0usize; z.len()];
+    for _ in 0..30 {
+        for (a, x) in assign.iter_mut().zip(&z) {
+            *a = (0..centres.len())
+                .min_by(|&i, &j| d2(x, &centres[i]).total_cmp(&d2(x, &centres[j])))
+                .unwrap_or(0);
+        }
+        let mut sums = vec![[0.0; PRIOR_DIMS]; centres.len()];
+        let mut counts = vec![0usize; centres.len()];
+        for (a, x) in assign.iter().zip(&z) {
+            counts[*a] += 1;
+            for i in 0..PRIOR_DIMS {
+                sums[*a][i] += x[i];
+            }
+        }
+        for (c, (s, n)) in centres.iter_mut().zip(sums.iter().zip(&counts)) {
+            if *n > 0 {
+                for i in 0..PRIOR_DIMS {
+                    c[i] = s[i] / *n as f64;
+                }
+            }
+        }
+    }
+    centres
+        .iter()
+        .map(|c| {
+            let m = (0..z.len())
+                .min_by(|&i, &j| d2(&z[i], c).total_cmp(&d2(&z[j], c)))
+                .unwrap_or(0);
+            samples[m]
         })
         .collect()
 }
@@ -532,10 +663,65 @@ mod tests {
         prior.write(&path).unwrap();
         let back = PosePrior::read(&path).unwrap();
         assert_eq!(back.sources(), ["walk"]);
+        assert_eq!(back.exemplars().len(), prior.exemplars().len());
+        for (a, b) in back.exemplars().iter().zip(prior.exemplars()) {
+            assert!(
+                a.iter().zip(b).all(|(a, b)| (a - b).abs() < 1e-9),
+                "{a:?} {b:?}"
+            );
+        }
         for pose in swinging().iter().step_by(17) {
             assert!((back.cost(pose) - prior.cost(pose)).abs() < 1e-9 * prior.cost(pose).max(1.0));
         }
         std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn the_exemplars_are_captured_poses_spread_over_them_the_same_each_time() {
+        let prior = learned();
+        let ex = prior.exemplars();
+        assert_eq!(ex.len(), EXEMPLARS);
+        assert_eq!(
+            ex,
+            learned().exemplars(),
+            "the same captures, the same exemplars"
+        );
+        // Each one is a captured pose or its mirror image, not an average.
+        let captured: Vec<[f64; PRIOR_DIMS]> = swinging()
+            .iter()
+            .flat_map(|p| [pick(p), pick(&exchange_sides(p))])
+            .collect();
+        for e in ex {
+            assert!(captured.contains(e), "{e:?} was not captured");
+        }
+        // Spread over the swing: both thighs forward and back among them.
+        let l_hip = PRIOR_PARAMS.iter().position(|&k| k == L_HIP_X).unwrap();
+        let (lo, hi) = ex.iter().fold((0.0f64, 0.0f64), |(lo, hi), e| {
+            (lo.min(e[l_hip]), hi.max(e[l_hip]))
+        });
+        assert!(
+            lo < -20.0 && hi > 20.0,
+            "the left thigh from {lo} to {hi} only"
+        );
+        // Placed as the base: root and heading kept, the angles the exemplar's.
+        let mut base = [0.0; MOTION_COUNT];
+        base[ix::ROOT_TZ] = -420.0;
+        base[ix::ROOT_RY] = 75.0;
+        let poses = prior.exemplar_poses(&base);
+        assert_eq!(poses.len(), EXEMPLARS);
+        assert_eq!(pick(&poses[3]), ex[3]);
+        assert_eq!(
+            (poses[3][ix::ROOT_TZ], poses[3][ix::ROOT_RY]),
+            (-420.0, 75.0)
+        );
+        // The built-in prior has its own, and a file written before them reads
+        // with none.
+        assert_eq!(PosePrior::builtin().exemplars().len(), EXEMPLARS);
+        let mut old: serde_json::Value =
+            serde_json::from_str(include_str!("pose_prior.json")).expect("JSON");
+        old.as_object_mut().unwrap().remove("exemplars");
+        let old = PosePrior::from_json(&old.to_string()).expect("an older file reads");
+        assert!(old.exemplars().is_empty());
     }
 
     #[test]
@@ -569,6 +755,12 @@ mod tests {
                 }
             },
             "positive definite",
+        );
+        check(
+            &|v| {
+                v["exemplars"][5].as_array_mut().unwrap().pop();
+            },
+            "exemplars: expected poses of 26",
         );
         assert!(PosePrior::from_json("[1, 2]").is_err());
         assert!(PosePrior::learn(&[named("one", swinging()[..3].to_vec())]).is_err());

@@ -470,6 +470,17 @@ pub struct TrackOptions {
     /// that follow tell the two apart better than the initial frame does (README,
     /// "Two starts, a round trunk and the start shape's").
     pub round_start: bool,
+    /// Fit each of the initialisation's 12 headings twice (true by default): from
+    /// the rest pose, as the paper does, and from the pose prior's exemplar
+    /// ([`PosePrior::exemplar_poses`]: 32 typical whole poses of the captures it
+    /// was learned from) that costs least at that heading, keeping the cheaper
+    /// fit. A pose far from the rest pose (a fighting stance, a bow, a leg raised
+    /// for a kick) is out of the simplex's reach from it, which then settles on a
+    /// wrong heading that explains the outline as well; one exemplar near the
+    /// person's pose starts the search in the right basin (README, "Whole poses
+    /// from the captures as starts"). No effect without a pose prior, or with one
+    /// whose file holds no exemplars.
+    pub exemplar_starts: bool,
     /// Evaluations of the initialisation's joint fit (8,000 by default; 0 for
     /// none): after the simplex has fitted the shape and the pose in turn, CMA-ES
     /// over the 12 shape values and the 30 pose values at once, under the
@@ -536,6 +547,7 @@ impl Default for TrackOptions {
             known_shape: None,
             start_shape: TYPICAL_SHAPE,
             round_start: true,
+            exemplar_starts: true,
             init_joint_evals: INIT_JOINT_EVALS,
             pose_prior: Some(PosePrior::builtin()),
             stop: None,
@@ -1383,7 +1395,8 @@ impl Tracker {
     /// Initialisation (method.md §5, paper §5.1) on one frame: place the body of
     /// [`TrackOptions::start_shape`] from the silhouette's bounding box, fit the pose
     /// from several headings (the silhouette does not say which way the person
-    /// faces) and keep the best, then fit the 12 shape values with the root
+    /// faces), each from the rest pose and from an exemplar
+    /// ([`TrackOptions::exemplar_starts`]), and keep the best, then fit the 12 shape values with the root
     /// translation, and the pose again; then both at once ([`Tracker::joint_fit`]).
     /// `target` is the frame as tracked: the fits judge by the paper's objective
     /// ([`Target::paper`]), the joint fit by the tracking one.
@@ -1430,6 +1443,11 @@ impl Tracker {
 
         // Each heading's fit is independent of the others': side by side.
         let threads = self.threads();
+        let exemplars = self
+            .opts
+            .pose_prior
+            .as_deref()
+            .filter(|p| self.opts.exemplar_starts && !p.exemplars().is_empty());
         let wide = || Search::initial(self, &start);
         let headings: Vec<i32> = (0..12).collect();
         let mut fits: Vec<(f64, Pose)> = par_map(&headings, threads, |&k| {
@@ -1439,7 +1457,15 @@ impl Tracker {
                 return (f64::INFINITY, p);
             }
             let (pose, cost) = wide().fit_wide(target, p, 2);
-            (cost, pose)
+            let Some(e) = exemplars.and_then(|x| cheapest_start(&wide(), target, &p, x)) else {
+                return (cost, pose);
+            };
+            let (other, other_cost) = wide().fit_wide(target, e, 2);
+            if other_cost < cost {
+                (other_cost, other)
+            } else {
+                (cost, pose)
+            }
         });
         fits.sort_by(|a, b| a.0.total_cmp(&b.0));
         let mut refined: Vec<(f64, Pose)> =
@@ -2983,6 +3009,23 @@ impl<'a> Search<'a> {
     }
 }
 
+/// Of `prior`'s exemplars ([`PosePrior::exemplar_poses`]) placed and turned as
+/// `base`, the one `search` prices lowest on `target`: one evaluation each.
+fn cheapest_start(
+    search: &Search,
+    target: &Target,
+    base: &Pose,
+    prior: &PosePrior,
+) -> Option<Pose> {
+    let mut ev = search.evaluator(target);
+    prior
+        .exemplar_poses(base)
+        .into_iter()
+        .map(|p| (ev.cost(&p), p))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+        .map(|(_, p)| p)
+}
+
 /// Coarse start for each limb in turn: the best of a grid of raised, spread and
 /// bent configurations (a limb far from the rest pose is out of the simplex's reach
 /// from it, and limbs barely interact in the silhouette).
@@ -3341,6 +3384,47 @@ mod tests {
         render_mask(&performer, &performer.posed(&pose), &cam, &mut m);
         let f = compute(&m, None, None, &FeatureOptions::default());
         (cam, Target::new(&f, &Weights::default()), pose)
+    }
+
+    #[test]
+    fn of_the_exemplar_starts_the_one_on_the_frame_costs_least() {
+        use crate::body::params::{MOTION, TYPICAL_SHAPE};
+        use crate::body::raster::render_mask;
+        use crate::vision::features::compute;
+        // A person in one of the built-in exemplars' poses, turned 30°: placed and
+        // turned as that frame's start, their own pose is the cheapest start.
+        let prior = PosePrior::builtin();
+        let cam = Camera::new(320, 240, 55.0);
+        let body = Body::new(&TYPICAL_SHAPE);
+        let mut base = rest_pose();
+        base[ix::ROOT_TZ] = -450.0;
+        base[ix::ROOT_RY] = 30.0;
+        let tracker = Tracker::new(cam.clone(), TrackOptions::default());
+        let search = Search::initial(&tracker, &body);
+        let poses = prior.exemplar_poses(&base);
+        let mut found = 0;
+        for (k, pose) in poses.iter().enumerate() {
+            // Captured poses, within the joint limits.
+            for (i, m) in MOTION.iter().enumerate() {
+                assert!(
+                    (m.lo..=m.hi).contains(&pose[i]),
+                    "exemplar {k}: {} {}",
+                    m.name,
+                    pose[i]
+                );
+            }
+            let mut m = Mask::new(cam.width, cam.height);
+            render_mask(&body, &body.posed(pose), &cam, &mut m);
+            let f = compute(&m, None, None, &FeatureOptions::default());
+            let target = Target::new(&f, &Weights::default());
+            let got = cheapest_start(&search, &target, &base, &prior).expect("exemplars");
+            if got == *pose {
+                found += 1;
+            } else {
+                println!("exemplar {k}: another exemplar costs less on its frame");
+            }
+        }
+        assert_eq!(found, poses.len(), "of {} exemplars", poses.len());
     }
 
     #[test]
