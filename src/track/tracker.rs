@@ -3010,7 +3010,9 @@ impl<'a> Search<'a> {
 }
 
 /// Of `prior`'s exemplars ([`PosePrior::exemplar_poses`]) placed and turned as
-/// `base`, the one `search` prices lowest on `target`: one evaluation each.
+/// `base`, the one `search` prices lowest on `target`: one evaluation each. None
+/// when every one costs +∞ (outside the joint limits: a prior file's exemplars
+/// are only checked to be finite).
 fn cheapest_start(
     search: &Search,
     target: &Target,
@@ -3022,6 +3024,7 @@ fn cheapest_start(
         .exemplar_poses(base)
         .into_iter()
         .map(|p| (ev.cost(&p), p))
+        .filter(|(f, _)| f.is_finite())
         .min_by(|a, b| a.0.total_cmp(&b.0))
         .map(|(_, p)| p)
 }
@@ -3425,6 +3428,30 @@ mod tests {
             }
         }
         assert_eq!(found, poses.len(), "of {} exemplars", poses.len());
+        // A prior file whose exemplars all bend a knee past its limit offers no
+        // start, rather than one that costs +∞.
+        let mut v: serde_json::Value =
+            serde_json::from_str(include_str!("pose_prior.json")).expect("JSON");
+        let knee = v["params"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .position(|p| p == "l_knee")
+            .unwrap();
+        for e in v["exemplars"].as_array_mut().unwrap() {
+            e[knee] = 400.0.into();
+        }
+        let dir = std::env::temp_dir().join(format!("monocap-exemplars-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("prior.json");
+        std::fs::write(&path, v.to_string()).unwrap();
+        let odd = PosePrior::read(&path).expect("finite exemplars read");
+        std::fs::remove_dir_all(&dir).ok();
+        let mut m = Mask::new(cam.width, cam.height);
+        render_mask(&body, &body.posed(&poses[0]), &cam, &mut m);
+        let f = compute(&m, None, None, &FeatureOptions::default());
+        let target = Target::new(&f, &Weights::default());
+        assert!(cheapest_start(&search, &target, &base, &odd).is_none());
     }
 
     #[test]
