@@ -510,9 +510,7 @@ fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRI
     let mut assign = vec![0usize; z.len()];
     for _ in 0..30 {
         for (a, x) in assign.iter_mut().zip(&z) {
-            *a = (0..centres.len())
-                .min_by(|&i, &j| d2(x, &centres[i]).total_cmp(&d2(x, &centres[j])))
-                .unwrap_or(0);
+            *a = nearest(&centres, x);
         }
         let mut sums = vec![[0.0; PRIOR_DIMS]; centres.len()];
         let mut counts = vec![0usize; centres.len()];
@@ -530,15 +528,18 @@ fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRI
             }
         }
     }
-    centres
+    centres.iter().map(|c| samples[nearest(&z, c)]).collect()
+}
+
+/// The index of the point of `points` nearest `p` (squared Euclidean distance, the
+/// first among equals; 0 when there are none).
+fn nearest(points: &[[f64; PRIOR_DIMS]], p: &[f64; PRIOR_DIMS]) -> usize {
+    points
         .iter()
-        .map(|c| {
-            let m = (0..z.len())
-                .min_by(|&i, &j| d2(&z[i], c).total_cmp(&d2(&z[j], c)))
-                .unwrap_or(0);
-            samples[m]
-        })
-        .collect()
+        .map(|q| q.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+        .enumerate()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map_or(0, |(i, _)| i)
 }
 
 fn pick(pose: &Pose) -> [f64; PRIOR_DIMS] {
