@@ -173,6 +173,24 @@ fn bad_input_fails_with_one_line_naming_the_problem() {
     let result = monocap(&["synth", "--bvh", s(&truncated), "--out", s(&out)]);
     assert_fails_with("truncated BVH", &result, "file ends");
 
+    // The system's reason is said once, not repeated after the message as its cause.
+    let no_clip = tmp.path("no-such-clip.y4m");
+    let bvh = tmp.path("x.bvh");
+    let reason = std::fs::File::open(&missing).unwrap_err().to_string();
+    for (what, args) in [
+        (
+            "missing BVH",
+            vec!["synth", "--bvh", s(&missing), "--out", s(&out)],
+        ),
+        ("missing clip", vec!["probe", s(&no_clip)]),
+        ("missing clip", vec!["track", s(&no_clip), "-o", s(&bvh)]),
+    ] {
+        let result = monocap(&args);
+        let stderr = String::from_utf8_lossy(&result.stderr);
+        assert_fails_with(what, &result, "no-such-");
+        assert_eq!(stderr.matches(&reason).count(), 1, "{what}: {stderr:?}");
+    }
+
     // Options.
     let nowhere = tmp.path("no-such-dir").join("x.zip");
     for (what, out, extra, needle) in [

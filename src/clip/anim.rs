@@ -389,7 +389,7 @@ pub fn image_err(path: &Path, e: ImageError) -> DecodeError {
         }
         ImageError::IoError(io) => DecodeError::Io {
             path: path.to_path_buf(),
-            source: io,
+            error: io,
         },
         ImageError::Unsupported(u) => DecodeError::UnsupportedCodec {
             path: path.to_path_buf(),

@@ -83,10 +83,11 @@ impl Limits {
 /// Why a clip cannot be read. `Display` is one line naming the file and the problem.
 #[derive(Debug, thiserror::Error)]
 pub enum DecodeError {
-    #[error("cannot read {path}: {source}", path = .path.display())]
+    #[error("cannot read {path}: {error}", path = .path.display())]
     Io {
         path: PathBuf,
-        source: std::io::Error,
+        /// Named so that the one-line message is not repeated as its source.
+        error: std::io::Error,
     },
     #[error("{path} is not a clip monocap can read: {what}", path = .path.display())]
     UnknownFormat { path: PathBuf, what: String },
@@ -121,10 +122,10 @@ impl DecodeError {
         }
     }
 
-    pub fn io(path: &Path, source: std::io::Error) -> DecodeError {
+    pub fn io(path: &Path, error: std::io::Error) -> DecodeError {
         DecodeError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         }
     }
 

@@ -107,16 +107,16 @@ fn describe(head: &[u8]) -> String {
 }
 
 fn read_head(path: &Path) -> Result<Vec<u8>, DecodeError> {
-    let file = File::open(path).map_err(|source| DecodeError::Io {
+    let file = File::open(path).map_err(|error| DecodeError::Io {
         path: path.to_path_buf(),
-        source,
+        error,
     })?;
     let mut head = Vec::with_capacity(SNIFF_LEN);
     file.take(SNIFF_LEN as u64)
         .read_to_end(&mut head)
-        .map_err(|source| DecodeError::Io {
+        .map_err(|error| DecodeError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         })?;
     Ok(head)
 }

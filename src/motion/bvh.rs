@@ -168,11 +168,11 @@ pub struct Bvh {
 #[non_exhaustive]
 pub enum BvhError {
     /// The file could not be opened or read.
-    #[error("cannot read {}: {source}", path.display())]
+    #[error("cannot read {}: {error}", path.display())]
     Io {
         path: PathBuf,
-        #[source]
-        source: io::Error,
+        /// Not a `#[source]`: the one-line message already carries it.
+        error: io::Error,
     },
     /// The file is larger than [`MAX_FILE_BYTES`].
     #[error("{} is {size} bytes, more than the limit of {limit} bytes", path.display())]
@@ -274,9 +274,9 @@ impl Bvh {
     ///
     /// [`BvhError::Io`] naming the path, [`BvhError::FileTooLarge`], or a parse error.
     pub fn read(path: &Path) -> Result<Bvh, BvhError> {
-        let io_error = |source| BvhError::Io {
+        let io_error = |error| BvhError::Io {
             path: path.to_path_buf(),
-            source,
+            error,
         };
         let too_large = |size| BvhError::FileTooLarge {
             path: path.to_path_buf(),
