@@ -155,7 +155,7 @@ struct WeightArgs {
     w_outline: f64,
     /// Reward per pixel of skin colour (learned on the initial frame) that the
     /// model's bare parts cover (forearms, hands, neck, head); 0 for none
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = monocap::track::objective::SKIN_WEIGHT)]
     w_skin: f64,
     /// Count whole pixels while tracking, as the paper does, instead of a pixel on
     /// the model's outline by the share of its row the model covers (the default,
