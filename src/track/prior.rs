@@ -286,7 +286,7 @@ impl PosePrior {
         PosePrior::from_json(&text).with_context(|| format!("pose prior {}", path.display()))
     }
 
-    fn from_json(text: &str) -> Result<PosePrior> {
+    pub(crate) fn from_json(text: &str) -> Result<PosePrior> {
         let f: PriorFile = serde_json::from_str(text).context("not a pose prior (JSON)")?;
         if f.format != FORMAT {
             bail!("format {:?}: expected {FORMAT:?}", f.format);
@@ -485,12 +485,9 @@ fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRI
             o
         })
         .collect();
-    let d2 = |a: &[f64; PRIOR_DIMS], b: &[f64; PRIOR_DIMS]| -> f64 {
-        a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
-    };
     let mut rng = rand::rngs::StdRng::seed_from_u64(7);
     let mut centres: Vec<[f64; PRIOR_DIMS]> = vec![z[rng.random_range(0..z.len())]];
-    let mut near: Vec<f64> = z.iter().map(|x| d2(x, &centres[0])).collect();
+    let mut near: Vec<f64> = z.iter().map(|x| dist2(x, &centres[0])).collect();
     while centres.len() < k.min(z.len()) {
         let total: f64 = near.iter().sum();
         let mut r = rng.random_range(0.0..total.max(1e-12));
@@ -504,7 +501,7 @@ fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRI
         }
         centres.push(z[pick]);
         for (n, x) in near.iter_mut().zip(&z) {
-            *n = n.min(d2(x, &z[pick]));
+            *n = n.min(dist2(x, &z[pick]));
         }
     }
     let mut assign = vec![0usize; z.len()];
@@ -536,10 +533,15 @@ fn medoids(samples: &[[f64; PRIOR_DIMS]], sd: &[f64], k: usize) -> Vec<[f64; PRI
 fn nearest(points: &[[f64; PRIOR_DIMS]], p: &[f64; PRIOR_DIMS]) -> usize {
     points
         .iter()
-        .map(|q| q.iter().zip(p).map(|(a, b)| (a - b) * (a - b)).sum::<f64>())
+        .map(|q| dist2(q, p))
         .enumerate()
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .map_or(0, |(i, _)| i)
+}
+
+/// Squared Euclidean distance between two points of the prior's space.
+fn dist2(a: &[f64; PRIOR_DIMS], b: &[f64; PRIOR_DIMS]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (x - y) * (x - y)).sum()
 }
 
 fn pick(pose: &Pose) -> [f64; PRIOR_DIMS] {

@@ -1396,8 +1396,9 @@ impl Tracker {
     /// [`TrackOptions::start_shape`] from the silhouette's bounding box, fit the pose
     /// from several headings (the silhouette does not say which way the person
     /// faces), each from the rest pose and from an exemplar
-    /// ([`TrackOptions::exemplar_starts`]), and keep the best, then fit the 12 shape values with the root
-    /// translation, and the pose again; then both at once ([`Tracker::joint_fit`]).
+    /// ([`TrackOptions::exemplar_starts`]), and keep the best, then fit the 12 shape
+    /// values with the root translation, and the pose again; then both at once
+    /// ([`Tracker::joint_fit`]).
     /// `target` is the frame as tracked: the fits judge by the paper's objective
     /// ([`Target::paper`]), the joint fit by the tracking one.
     ///
@@ -3441,12 +3442,7 @@ mod tests {
         for e in v["exemplars"].as_array_mut().unwrap() {
             e[knee] = 400.0.into();
         }
-        let dir = std::env::temp_dir().join(format!("monocap-exemplars-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let path = dir.join("prior.json");
-        std::fs::write(&path, v.to_string()).unwrap();
-        let odd = PosePrior::read(&path).expect("finite exemplars read");
-        std::fs::remove_dir_all(&dir).ok();
+        let odd = PosePrior::from_json(&v.to_string()).expect("finite exemplars read");
         let mut m = Mask::new(cam.width, cam.height);
         render_mask(&body, &body.posed(&poses[0]), &cam, &mut m);
         let f = compute(&m, None, None, &FeatureOptions::default());
