@@ -395,19 +395,29 @@ impl Prepared {
     /// touches it between the caps, else the ends of the caps' own spans
     /// ([`Prepared::cylinder_row`]). Where those quadratics degenerate, each end is
     /// found to 1/64 of a pixel by bisection ([`Prepared::bisected_row`]).
-    fn row_interval(&self, y: i64, width: f64) -> Option<(f64, f64)> {
+    ///
+    /// Returned as stored in [`PartSpans`], `[0, 0]` when the row misses the part:
+    /// a value that fits a register (a wider one went through memory and stalled
+    /// the loop that stores it).
+    #[inline(always)]
+    fn row_interval(&self, y: i64, width: f64) -> [f32; 2] {
         let r = self.row_base(y as f64 + 0.5);
-        let (lo, hi) = match self.row_roots(&r)? {
-            Some((lo, hi)) if self.kind == Kind::Ellipsoid => (lo, hi),
-            Some((lo, hi)) => match self.cylinder_row(&r, lo, hi) {
+        let (lo, hi) = match self.row_roots(&r) {
+            None => return [0.0; 2],
+            Some(Some((lo, hi))) if self.kind == Kind::Ellipsoid => (lo, hi),
+            Some(Some((lo, hi))) => match self.cylinder_row(&r, lo, hi) {
                 Some(Some(iv)) => iv,
                 Some(None) => return self.bisected_row(&r, Some((lo, hi)), width),
-                None => return None,
+                None => return [0.0; 2],
             },
-            None => return self.bisected_row(&r, None, width),
+            Some(None) => return self.bisected_row(&r, None, width),
         };
         let (lo, hi) = (lo.max(0.0), hi.min(width));
-        (lo < hi).then_some((lo, hi))
+        if lo < hi {
+            [lo as f32, hi as f32]
+        } else {
+            [0.0; 2]
+        }
     }
 
     /// A cylinder's span along the row `r` inside its hull's span `[lo, hi]`: None
@@ -470,12 +480,8 @@ impl Prepared {
     /// A cylinder's span along the row `r` found by ray tests: inside the hull's
     /// span (None: the whole box), each end bisected to 1/64 of a pixel, clipped
     /// to `[0, width]`. A sliver between two pixel centres is missed.
-    fn bisected_row(
-        &self,
-        r: &Vector3<f64>,
-        hull: Option<(f64, f64)>,
-        width: f64,
-    ) -> Option<(f64, f64)> {
+    #[inline(never)]
+    fn bisected_row(&self, r: &Vector3<f64>, hull: Option<(f64, f64)>, width: f64) -> [f32; 2] {
         let (lo, hi, exact) = match hull {
             Some((lo, hi)) => (lo.max(0.0), hi.min(width), true),
             None => (
@@ -485,7 +491,7 @@ impl Prepared {
             ),
         };
         if lo >= hi {
-            return None;
+            return [0.0; 2];
         }
         let dir = |u: f64| r + u * self.p;
         let (first, last) = (ceil_i64(lo - 0.5), floor_i64(hi - 0.5));
@@ -497,7 +503,7 @@ impl Prepared {
             x1 -= 1;
         }
         if x0 > x1 {
-            return None;
+            return [0.0; 2];
         }
         // From a point off the part (`out`) to one on it (`inside`): where the
         // ray test changes.
@@ -525,7 +531,11 @@ impl Prepared {
             edge(hi.min(x1 as f64 + 1.5), x1 as f64 + 0.5)
         };
         let (l, h) = (l.max(0.0), h.min(width));
-        (l < h).then_some((l, h))
+        if l < h {
+            [l as f32, h as f32]
+        } else {
+            [0.0; 2]
+        }
     }
 
     /// The exact ray test for the pixel whose ray direction is `d`.
@@ -780,10 +790,7 @@ pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out
             continue;
         };
         for y in prep.y0..=prep.y1 {
-            out.spans[pi * h + y as usize] = match prep.row_interval(y, cam.width as f64) {
-                Some((lo, hi)) => [lo as f32, hi as f32],
-                None => [0.0; 2],
-            };
+            out.spans[pi * h + y as usize] = prep.row_interval(y, cam.width as f64);
         }
         out.rows[pi] = Some((prep.y0 as u32, prep.y1 as u32));
     }
