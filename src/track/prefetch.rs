@@ -6,6 +6,7 @@
 //! same order.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc::{sync_channel, Receiver, SyncSender};
 use std::thread::Scope;
 
@@ -158,8 +159,9 @@ impl<I: Iterator<Item = anyhow::Result<FrameInput>>> Prefetch<I> {
 }
 
 /// `f` over `items` on up to `threads` threads, which end before this returns;
-/// results in the order of `items`. Items whose thread the system cannot start are
-/// mapped on the caller's thread.
+/// results in the order of `items`. Each thread takes the next item not yet taken,
+/// so one slow item does not leave the other threads idle behind a fixed share.
+/// Items whose thread the system cannot start are mapped on the caller's thread.
 pub(crate) fn par_map<T: Sync, R: Send>(
     items: &[T],
     threads: usize,
@@ -169,29 +171,26 @@ pub(crate) fn par_map<T: Sync, R: Send>(
     if threads == 1 {
         return items.iter().map(f).collect();
     }
-    let f = &f;
-    let share = move |t: usize| -> Vec<(usize, R)> {
-        (t..items.len())
-            .step_by(threads)
-            .map(|i| (i, f(&items[i])))
-            .collect()
+    let next = AtomicUsize::new(0);
+    let take = || -> Vec<(usize, R)> {
+        let mut done = Vec::new();
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(i) else {
+                return done;
+            };
+            done.push((i, f(item)));
+        }
     };
+    let take = &take;
     let mut parts: Vec<Vec<(usize, R)>> = std::thread::scope(|s| {
-        // The caller's thread takes the first share itself.
         let handles: Vec<_> = (1..threads)
-            .map(|t| {
-                (
-                    t,
-                    std::thread::Builder::new().spawn_scoped(s, move || share(t)),
-                )
-            })
+            .map(|_| std::thread::Builder::new().spawn_scoped(s, take))
             .collect();
-        let mut parts = vec![share(0)];
-        for (t, h) in handles {
-            parts.push(match h {
-                Ok(h) => h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)),
-                Err(_) => share(t),
-            });
+        // The caller's thread takes items too, and all that no thread started for.
+        let mut parts = vec![take()];
+        for h in handles.into_iter().flatten() {
+            parts.push(h.join().unwrap_or_else(|e| std::panic::resume_unwind(e)));
         }
         parts
     });
