@@ -837,14 +837,18 @@ impl Tracker {
         // ([`TrackOptions::round_start`]).
         let starts: Vec<(ShapeValues, Vec<Pose>)> = match self.opts.initial {
             Some((shape, pose)) => vec![(shape, vec![pose])],
-            None => {
-                let mut starts = vec![self.initialise(init_target)];
-                if two_starts {
-                    let round = round_trunk(&self.opts.start_shape);
-                    starts.push(self.initialise_with(init_target, None, &round));
-                }
-                starts
+            None if two_starts => {
+                // Independent of each other: side by side, each as one thread would.
+                let round = round_trunk(&self.opts.start_shape);
+                par_map(&[false, true], self.threads(), |&round_trunk| {
+                    if round_trunk {
+                        self.initialise_with(init_target, None, &round)
+                    } else {
+                        self.initialise(init_target)
+                    }
+                })
             }
+            None => vec![self.initialise(init_target)],
         };
         // Initialisation gives up early when asked to stop; its result is then moot.
         self.check_stop()?;
