@@ -178,23 +178,24 @@ pub struct Target {
 }
 
 /// Each gain map's running sums along its rows: `width + 1` per row, the entry at
-/// x the sum of the row's first x pixels.
+/// x the sum of the row's first x pixels beside pixel x's own gain (0 past the
+/// row's end), so that a point inside a pixel is one load ([`integral`]).
 #[derive(Clone, Debug)]
 struct RunningSums {
-    gain: Vec<f32>,
-    limb: Vec<f32>,
-    skin: Vec<f32>,
+    gain: Vec<[f32; 2]>,
+    limb: Vec<[f32; 2]>,
+    skin: Vec<[f32; 2]>,
 }
 
-fn running_sums(map: &[f32], width: usize) -> Vec<f32> {
+fn running_sums(map: &[f32], width: usize) -> Vec<[f32; 2]> {
     let mut out = Vec::with_capacity(map.len() / width.max(1) * (width + 1));
     for row in map.chunks(width.max(1)) {
         let mut acc = 0f32;
-        out.push(0.0);
         for &g in row {
+            out.push([acc, g]);
             acc += g;
-            out.push(acc);
         }
+        out.push([acc, 0.0]);
     }
     out
 }
@@ -861,8 +862,7 @@ impl Smooth {
         span_parts(body, base, cam, &fixed, &mut self.spans);
         let sums = target.sums();
         for layer in &mut self.layers {
-            let (gain, run) = layer.map.of(target, sums);
-            layer.fix(&self.spans, &fixed, gain, run);
+            layer.fix(&self.spans, &fixed, layer.map.of(sums));
         }
     }
 
@@ -879,9 +879,8 @@ impl Smooth {
         let sums = target.sums();
         let mut total = 0.0;
         for layer in &self.layers {
-            let (gain, run) = layer.map.of(target, sums);
-            total +=
-                layer.fixed_sum + layer.sum(&self.spans, &self.moving, &mut self.rows, gain, run);
+            let run = layer.map.of(sums);
+            total += layer.fixed_sum + layer.sum(&self.spans, &self.moving, &mut self.rows, run);
         }
         total
     }
@@ -896,12 +895,12 @@ enum Map {
 }
 
 impl Map {
-    /// The gain map and its running sums.
-    fn of<'t>(self, target: &'t Target, sums: &'t RunningSums) -> (&'t [f32], &'t [f32]) {
+    /// The gain map's running sums.
+    fn of(self, sums: &RunningSums) -> &[[f32; 2]] {
         match self {
-            Map::All => (&target.gain, &sums.gain),
-            Map::Limbs => (&target.limb_gain, &sums.limb),
-            Map::Skin => (&target.skin_gain, &sums.skin),
+            Map::All => &sums.gain,
+            Map::Limbs => &sums.limb,
+            Map::Skin => &sums.skin,
         }
     }
 }
@@ -944,7 +943,7 @@ impl SpanLayer {
         self.fixed_sum = 0.0;
     }
 
-    fn fix(&mut self, spans: &PartSpans, fixed: &[usize], gain: &[f32], run: &[f32]) {
+    fn fix(&mut self, spans: &PartSpans, fixed: &[usize], run: &[[f32; 2]]) {
         self.unfix();
         let h = self.fixed_row.len();
         let mut buf = [[0f32; 2]; ROW_CAP];
@@ -967,7 +966,7 @@ impl SpanLayer {
             sort_spans(&mut buf[..n]);
             let row_sum = union_sum(&buf[..n], &[], |a, b| {
                 self.fixed.push([a, b]);
-                integral(gain, run, self.width, y, a, b)
+                integral(run, self.width, y, a, b)
             });
             self.off[y + 1] = self.fixed.len() as u32;
             self.fixed_row[y] = row_sum;
@@ -982,8 +981,7 @@ impl SpanLayer {
         spans: &PartSpans,
         moving: &[usize],
         rows: &mut RowBuckets,
-        gain: &[f32],
-        run: &[f32],
+        run: &[[f32; 2]],
     ) -> f64 {
         let Some((y0, y1)) = rows.gather(spans, moving, &self.members) else {
             return 0.0;
@@ -995,9 +993,7 @@ impl SpanLayer {
                 continue;
             };
             let fixed = &self.fixed[self.off[yi] as usize..self.off[yi + 1] as usize];
-            let row = union_sum(moving, fixed, |a, b| {
-                integral(gain, run, self.width, yi, a, b)
-            });
+            let row = union_sum(moving, fixed, |a, b| integral(run, self.width, yi, a, b));
             total += row - self.fixed_row[yi];
         }
         total as f64
@@ -1109,17 +1105,14 @@ fn union_sum(a: &[[f32; 2]], b: &[[f32; 2]], mut f: impl FnMut(f32, f32) -> f32)
 }
 
 /// ∫ of row `y` of the gain map over columns `[a, b]` (0 ≤ a ≤ b ≤ width), a pixel
-/// counting by the share of it the interval covers.
+/// counting by the share of it the interval covers; `run` as [`RunningSums`] keeps it.
 #[inline]
-fn integral(gain: &[f32], run: &[f32], width: usize, y: usize, a: f32, b: f32) -> f32 {
+fn integral(run: &[[f32; 2]], width: usize, y: usize, a: f32, b: f32) -> f32 {
     let at = |u: f32| {
         let x = (u as usize).min(width);
-        let p = run[y * (width + 1) + x];
-        if x < width {
-            p + (u - x as f32) * gain[y * width + x]
-        } else {
-            p
-        }
+        let [p, g] = run[y * (width + 1) + x];
+        // Past the row's end g is 0 and u is the width: p itself.
+        p + (u - x as f32) * g
     };
     at(b) - at(a)
 }
