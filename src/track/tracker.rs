@@ -838,7 +838,8 @@ impl Tracker {
         let starts: Vec<(ShapeValues, Vec<Pose>)> = match self.opts.initial {
             Some((shape, pose)) => vec![(shape, vec![pose])],
             None if two_starts => {
-                // Independent of each other: side by side, each as one thread would.
+                // Independent of each other: side by side, each with the answer it gives
+                // alone (each also fits its headings on the threads it is given).
                 let round = round_trunk(&self.opts.start_shape);
                 par_map(&[false, true], self.threads(), |&round_trunk| {
                     if round_trunk {
