@@ -78,7 +78,7 @@ pub struct JobOptions {
     /// see `Weights::outline`; 0 for never).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_outline: Option<f64>,
-    /// Reward per pixel of skin colour the model's bare parts cover (default 4,
+    /// Reward per pixel of skin colour the model's bare parts cover (default 2,
     /// see `Weights::skin`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_skin: Option<f64>,
