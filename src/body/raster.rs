@@ -412,12 +412,7 @@ impl Prepared {
             },
             Some(None) => return self.bisected_row(&r, None, width),
         };
-        let (lo, hi) = (lo.max(0.0), hi.min(width));
-        if lo < hi {
-            [lo as f32, hi as f32]
-        } else {
-            [0.0; 2]
-        }
+        stored_span(lo, hi, width)
     }
 
     /// A cylinder's span along the row `r` inside its hull's span `[lo, hi]`: None
@@ -530,12 +525,7 @@ impl Prepared {
         } else {
             edge(hi.min(x1 as f64 + 1.5), x1 as f64 + 0.5)
         };
-        let (l, h) = (l.max(0.0), h.min(width));
-        if l < h {
-            [l as f32, h as f32]
-        } else {
-            [0.0; 2]
-        }
+        stored_span(l, h, width)
     }
 
     /// The exact ray test for the pixel whose ray direction is `d`.
@@ -604,6 +594,18 @@ fn floor_i64(x: f64) -> i64 {
         t.saturating_sub(1)
     } else {
         t
+    }
+}
+
+/// The span `[lo, hi]` clipped to `[0, width]` as [`PartSpans`] stores it: `[0, 0]`
+/// when nothing is left.
+#[inline(always)]
+fn stored_span(lo: f64, hi: f64, width: f64) -> [f32; 2] {
+    let (lo, hi) = (lo.max(0.0), hi.min(width));
+    if lo < hi {
+        [lo as f32, hi as f32]
+    } else {
+        [0.0; 2]
     }
 }
 

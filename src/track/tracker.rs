@@ -841,8 +841,8 @@ impl Tracker {
                 // Independent of each other: side by side, each with the answer it gives
                 // alone (each also fits its headings on the threads it is given).
                 let round = round_trunk(&self.opts.start_shape);
-                par_map(&[false, true], self.threads(), |&round_trunk| {
-                    if round_trunk {
+                par_map(&[false, true], self.threads(), |&rounded| {
+                    if rounded {
                         self.initialise_with(init_target, None, &round)
                     } else {
                         self.initialise(init_target)
