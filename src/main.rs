@@ -153,6 +153,12 @@ struct WeightArgs {
     /// (a depth flip, the legs or arms swapped left for right); 0 for never
     #[arg(long, default_value_t = monocap::track::objective::OUTLINE_WEIGHT)]
     w_outline: f64,
+    /// Weight of the shading (per level² of brightness misfit over the person's
+    /// pixels, each material's brightness fitted to the pose's surface normals),
+    /// beside the inner outlines when choosing between a frame's result and a jump;
+    /// 0 for never
+    #[arg(long, default_value_t = 0.0)]
+    w_shading: f64,
     /// Reward per pixel of skin colour (learned on the initial frame) that the
     /// model's bare parts cover (forearms, hands, neck, head); 0 for none
     #[arg(long, default_value_t = monocap::track::objective::SKIN_WEIGHT)]
@@ -177,6 +183,7 @@ impl WeightArgs {
             ("--w-region", self.w_region),
             ("--reward-rim", self.reward_rim),
             ("--w-outline", self.w_outline),
+            ("--w-shading", self.w_shading),
             ("--w-skin", self.w_skin),
             ("--w-prior", self.w_prior),
         ] {
@@ -194,6 +201,7 @@ impl WeightArgs {
         w.reward_rim = self.reward_rim;
         w.track_rewards = self.track_rewards;
         w.outline = self.w_outline;
+        w.shading = self.w_shading;
         w.skin = self.w_skin;
         w.smooth = !self.whole_pixels;
         w.prior = self.w_prior;

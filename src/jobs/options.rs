@@ -78,6 +78,10 @@ pub struct JobOptions {
     /// see `Weights::outline`; 0 for never).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_outline: Option<f64>,
+    /// Weight of the shading beside the inner outlines, per level² of brightness
+    /// misfit over the person's pixels (default 0, see `Weights::shading`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub w_shading: Option<f64>,
     /// Reward per pixel of skin colour the model's bare parts cover (default 2,
     /// see `Weights::skin`).
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -210,6 +214,7 @@ impl JobOptions {
             ("w_core", self.w_core, &mut o.track.features.core_weight),
             ("reward_rim", self.reward_rim, &mut w.reward_rim),
             ("w_outline", self.w_outline, &mut w.outline),
+            ("w_shading", self.w_shading, &mut w.shading),
             ("w_skin", self.w_skin, &mut w.skin),
             ("w_prior", self.w_prior, &mut w.prior),
         ] {

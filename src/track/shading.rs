@@ -102,38 +102,37 @@ impl Shading {
     }
 }
 
+/// The brightness of `pose` lit from above and in front (each material its own
+/// albedo, a quarter of the light ambient), and its silhouette.
+#[cfg(test)]
+pub(crate) fn picture(body: &Body, cam: &Camera, pose: &Pose) -> (Vec<u8>, Mask) {
+    let mut fr = Fragments::new(cam.width, cam.height);
+    render_fragments(body, &body.posed(pose), cam, &mut fr);
+    let light = nalgebra::Vector3::new(-0.3, 0.8, 0.5).normalize();
+    let luma = (0..fr.depth.len())
+        .map(|i| {
+            if !fr.depth[i].is_finite() {
+                return 128;
+            }
+            let n = fr.normal[i];
+            let lambert =
+                (f64::from(n[0]) * light.x + f64::from(n[1]) * light.y + f64::from(n[2]) * light.z)
+                    .max(0.0);
+            let albedo = [230.0, 120.0, 90.0, 50.0]
+                [material_index(body.parts[fr.part[i] as usize].material)];
+            (albedo * (0.25 + 0.75 * lambert)).round() as u8
+        })
+        .collect();
+    let mut m = Mask::new(cam.width, cam.height);
+    crate::body::raster::render_mask(body, &body.posed(pose), cam, &mut m);
+    (luma, m)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::body::params::{ix, rest_pose, STANDARD_SHAPE};
-    use crate::body::raster::render_mask;
     use crate::body::skeleton::standard_rest;
-
-    /// The brightness of `pose` lit from above and in front (each material its own
-    /// albedo, a quarter of the light ambient).
-    fn picture(body: &Body, cam: &Camera, pose: &Pose) -> (Vec<u8>, Mask) {
-        let mut fr = Fragments::new(cam.width, cam.height);
-        render_fragments(body, &body.posed(pose), cam, &mut fr);
-        let light = nalgebra::Vector3::new(-0.3, 0.8, 0.5).normalize();
-        let luma = (0..fr.depth.len())
-            .map(|i| {
-                if !fr.depth[i].is_finite() {
-                    return 128;
-                }
-                let n = fr.normal[i];
-                let lambert = (f64::from(n[0]) * light.x
-                    + f64::from(n[1]) * light.y
-                    + f64::from(n[2]) * light.z)
-                    .max(0.0);
-                let albedo = [230.0, 120.0, 90.0, 50.0]
-                    [material_index(body.parts[fr.part[i] as usize].material)];
-                (albedo * (0.25 + 0.75 * lambert)).round() as u8
-            })
-            .collect();
-        let mut m = Mask::new(cam.width, cam.height);
-        render_mask(body, &body.posed(pose), cam, &mut m);
-        (luma, m)
-    }
 
     #[test]
     fn shading_tells_an_arm_raised_towards_the_camera_from_one_raised_away() {

@@ -58,6 +58,7 @@ pub use super::prefetch::MAX_THREADS;
 use super::prefetch::{default_threads, par_map, Prefetch};
 use super::prior::PosePrior;
 use super::refit::{Job, Window};
+use super::shading::Shading;
 use super::simplex::{minimize, SimplexOptions};
 use crate::body::params::{
     clamp_to_limits, ix, rest_pose, Group, Pose, ShapeValues, MOTION, MOTION_COUNT, SHAPE,
@@ -717,6 +718,7 @@ impl Tracker {
     pub fn features(&self) -> FeatureOptions {
         FeatureOptions {
             colours: self.opts.weights.skin > 0.0,
+            luma: self.opts.weights.shading > 0.0,
             ..self.opts.features.clone()
         }
     }
@@ -2357,6 +2359,8 @@ struct Search<'a> {
     evals: u64,
     /// Buffers of [`Search::outline_cost`], made when first needed.
     outlines: std::cell::RefCell<Option<Outlines>>,
+    /// Buffers of [`Search::shading_cost`], made when first needed.
+    shading: std::cell::RefCell<Option<Shading>>,
     /// Weigh the inner outlines in ([`Search::outline_cost`]); off for the probes
     /// that compare the initial candidates, which F and the facing rule decide.
     weigh_outlines: bool,
@@ -2376,6 +2380,7 @@ impl<'a> Search<'a> {
             ground,
             evals: 0,
             outlines: std::cell::RefCell::new(None),
+            shading: std::cell::RefCell::new(None),
             weigh_outlines: true,
             joint_velocity: tracker.opts.joint_velocity,
             weights: tracker.opts.weights,
@@ -2411,6 +2416,32 @@ impl<'a> Search<'a> {
             .disagreement(self.body, cam, target, pose)
             .unwrap_or(0.0);
         self.tracker.opts.weights.outline * d
+    }
+
+    /// What `pose`'s shading costs on `target` ([`Weights::shading`] per level² of
+    /// brightness misfit, summed over the person's pixels); 0 where
+    /// [`Search::weighs_outlines`] says no or the frame's brightness was not kept.
+    fn shading_cost(&self, target: &Target, pose: &Pose) -> f64 {
+        let w = self.tracker.opts.weights.shading;
+        let Some(luma) = target.luma.as_deref() else {
+            return 0.0;
+        };
+        if !(self.weighs_outlines(target) && w > 0.0) {
+            return 0.0;
+        }
+        let cam = &self.tracker.camera;
+        let (misfit, n) = self
+            .shading
+            .borrow_mut()
+            .get_or_insert_with(|| Shading::new(cam))
+            .misfit(self.body, cam, luma, &target.silhouette, pose);
+        w * misfit * n as f64
+    }
+
+    /// What tells apart poses with nearly the same silhouette:
+    /// [`Search::outline_cost`] plus [`Search::shading_cost`].
+    fn judge_cost(&self, target: &Target, pose: &Pose) -> f64 {
+        self.outline_cost(target, pose) + self.shading_cost(target, pose)
     }
 
     fn evaluator<'b>(&'b self, target: &'b Target) -> Evaluator<'b> {
@@ -2548,8 +2579,8 @@ impl<'a> Search<'a> {
                 &lo,
                 &hi,
                 index as u64,
-            ) && polished_f + self.outline_cost(target, &polished)
-                < best_f + self.outline_cost(target, &best)
+            ) && polished_f + self.judge_cost(target, &polished)
+                < best_f + self.judge_cost(target, &best)
             {
                 (best, best_f) = (polished, polished_f);
                 iou = ev.iou(&best);
@@ -2794,11 +2825,11 @@ impl<'a> Search<'a> {
                 continue;
             }
             let better = if weigh {
-                let o = *best_o.get_or_insert_with(|| self.outline_cost(target, best));
+                let o = *best_o.get_or_insert_with(|| self.judge_cost(target, best));
                 // Outline costs are ≥ 0: a jump dearer by more than the result's
                 // own cannot win.
                 f - *best_f < o && {
-                    let o_jump = self.outline_cost(target, &pose);
+                    let o_jump = self.judge_cost(target, &pose);
                     let wins = f + o_jump < *best_f + o;
                     if wins {
                         best_o = Some(o_jump);
@@ -3393,6 +3424,71 @@ mod tests {
         render_mask(&performer, &performer.posed(&pose), &cam, &mut m);
         let f = compute(&m, None, None, &FeatureOptions::default());
         (cam, Target::new(&f, &Weights::default()), pose)
+    }
+
+    #[test]
+    fn the_shading_judge_prices_an_arm_flipped_in_depth() {
+        use crate::body::params::STANDARD_SHAPE;
+        use crate::body::skeleton::standard_rest;
+        use crate::track::flips::FLIPS;
+        use crate::vision::features::compute;
+        // A shaded colour frame of a person facing the camera, the right arm raised
+        // forwards, against the same outline with the arm raised as far backwards.
+        let cam = Camera::new(320, 240, 55.0);
+        let body = Body::new(&STANDARD_SHAPE);
+        let (_, rest) = standard_rest();
+        let mut pose = rest_pose();
+        // The camera at the height of the chest, the whole body in view.
+        pose[ix::ROOT_TY] = rest[ix::ROOT_TY] - 130.0;
+        pose[ix::ROOT_TZ] = -350.0;
+        pose[ix::R_SHOULDER] = 40.0;
+        pose[ix::R_SHOULDER + 1] = 30.0;
+        let flip = FLIPS.iter().find(|f| f.name == "right arm").expect("flip");
+        let flipped = flip.apply(&body, &pose).expect("the arm is raised");
+        let (luma, person) = crate::track::shading::picture(&body, &cam, &pose);
+        let picture = image::RgbImage::from_fn(cam.width, cam.height, |x, y| {
+            image::Rgb([luma[(y * cam.width + x) as usize]; 3])
+        });
+        let target = |keep: bool| {
+            let opts = FeatureOptions {
+                luma: keep,
+                ..FeatureOptions::default()
+            };
+            Target::new(
+                &compute(&person, Some(&picture), None, &opts),
+                &Weights::default(),
+            )
+        };
+        let mut opts = TrackOptions::default();
+        opts.weights.shading = 0.001;
+        let tracker = Tracker::new(cam.clone(), opts);
+        assert!(
+            tracker.features().luma,
+            "the brightness is kept when weighed"
+        );
+        let search = Search::new(&tracker, &body, f64::NEG_INFINITY);
+        let kept = target(true);
+        assert_eq!(
+            kept.luma.as_deref(),
+            Some(&luma),
+            "grey frames keep their level"
+        );
+        let right = search.shading_cost(&kept, &pose);
+        let wrong = search.shading_cost(&kept, &flipped);
+        assert!(
+            right >= 0.0 && wrong > 2.0 * right + 1.0,
+            "{right} vs {wrong}"
+        );
+        assert_eq!(
+            search.judge_cost(&kept, &flipped),
+            search.outline_cost(&kept, &flipped) + wrong
+        );
+        // Without the frame's brightness, or at weight 0 (the default), nothing.
+        assert_eq!(search.shading_cost(&target(false), &flipped), 0.0);
+        let off = Tracker::new(cam.clone(), TrackOptions::default());
+        assert!(!off.features().luma);
+        let search = Search::new(&off, &body, f64::NEG_INFINITY);
+        assert_eq!(search.shading_cost(&kept, &flipped), 0.0);
     }
 
     #[test]

@@ -69,6 +69,9 @@ pub struct FeatureOptions {
     /// Keep the colour bin of each of the person's pixels
     /// ([`FrameFeatures::colours`], for the skin term); off unless it is weighed.
     pub colours: bool,
+    /// Keep the frame's brightness ([`FrameFeatures::luma`], for the shading
+    /// judge); off unless it is weighed.
+    pub luma: bool,
 }
 
 impl Default for FeatureOptions {
@@ -84,6 +87,7 @@ impl Default for FeatureOptions {
             max_jump: 0.15,
             min_body_height: 16,
             colours: false,
+            luma: false,
         }
     }
 }
@@ -162,6 +166,10 @@ pub struct FrameFeatures {
     /// for the skin term; None without a colour frame or
     /// [`FeatureOptions::colours`].
     pub colours: Option<Arc<Vec<u16>>>,
+    /// The colour frame's brightness (the mean of its channels), row-major; None
+    /// without a colour frame of the silhouette's size or unless
+    /// [`FeatureOptions::luma`] asks for it.
+    pub luma: Option<Arc<Vec<u8>>>,
 }
 
 impl FrameFeatures {
@@ -236,7 +244,13 @@ pub fn compute_unlinked(
         bbox: None,
         body_height: 0.0,
         colours: None,
+        luma: None,
     };
+    if opts.luma {
+        f.luma = frame
+            .filter(|fr| fr.dimensions() == (w, h))
+            .map(|fr| Arc::new(luma(fr)));
+    }
     if silhouette.count() == 0 {
         return f;
     }
@@ -283,6 +297,14 @@ pub fn compute_unlinked(
     }
     f.extremities = cands;
     f
+}
+
+/// A colour frame's brightness: the mean of each pixel's three channels, rounded.
+pub fn luma(frame: &RgbImage) -> Vec<u8> {
+    frame
+        .pixels()
+        .map(|p| ((u16::from(p[0]) + u16::from(p[1]) + u16::from(p[2]) + 1) / 3) as u8)
+        .collect()
 }
 
 /// The temporal coherence of [`compute`] (its rule), applied to the features of
