@@ -263,6 +263,11 @@ struct Prepared {
     op: f64,
     k: f64,
     a: f64,
+    /// 1/(2a): the rows' roots without a division ([`roots_by_centre`]).
+    inv_2a: f64,
+    /// A cylinder's caps (y = 0 and y = 1) as [`Prepared::cylinder_row`] meets them:
+    /// the terms of each cap's row quadratic that are the same on every row.
+    caps: [Cap; 2],
     /// Inclusive pixel bounds of the projected bounding box, clipped to the image.
     x0: i64,
     x1: i64,
@@ -328,6 +333,8 @@ impl Prepared {
             op,
             k,
             a: op * op - k * pp,
+            inv_2a: 0.5 / (op * op - k * pp),
+            caps: [Cap::new(&o, &p, 0.0), Cap::new(&o, &p, 1.0)],
             x0,
             x1,
             y0,
@@ -365,7 +372,7 @@ impl Prepared {
             return Some(None);
         }
         // a < 0, so the test passes between the roots.
-        quadratic_roots(a, b, c).map(Some)
+        roots_by_centre(a, b, c, self.inv_2a).map(Some)
     }
 
     /// The inclusive pixel span of a row where the quadratic's test passes, clipped
@@ -428,24 +435,17 @@ impl Prepared {
             if a < 1e-18 {
                 return None;
             }
-            let y = o.y - b / a * (r.y + u * self.p.y);
-            Some((0.0..=1.0).contains(&y))
+            // The touching point's height y = o.y − b/a·d.y, scaled by a > 0.
+            let ay = a * o.y - b * (r.y + u * self.p.y);
+            Some((0.0..=a).contains(&ay))
         };
         let (Some(lo_in), Some(hi_in)) = (grazes(lo), grazes(hi)) else {
             return Some(None);
         };
-        // Each cap's span: where the ray meets the plane y = c inside the unit
-        // circle, (o.x·d.y + s·d.x)² + (o.z·d.y + s·d.z)² ≤ d.y² with s = c − o.y,
-        // a quadratic in u with d = r + u·p whose leading coefficient is the same on
-        // every row. Not an ellipse in the image (a cap seen edge-on): bisect.
+        // Each cap's span is a quadratic's ([`Cap`]). Not an ellipse in the image (a
+        // cap seen edge-on): bisect.
         let (p, q) = (&self.p, r);
-        let cap = |c: f64| {
-            let s = c - o.y;
-            let (x1, z1) = (o.x * p.y + s * p.x, o.z * p.y + s * p.z);
-            (s, x1, z1, x1 * x1 + z1 * z1 - p.y * p.y)
-        };
-        let ends = [cap(0.0), cap(1.0)];
-        if ends.iter().any(|e| e.3 <= 0.0) {
+        if self.caps.iter().any(|c| c.a <= 0.0) {
             return Some(None);
         }
         // Both ends graze the side: the caps' spans are not needed.
@@ -453,11 +453,11 @@ impl Prepared {
             return Some((lo < hi).then_some((lo, hi)));
         }
         let mut caps: Option<(f64, f64)> = None;
-        for (s, x1, z1, a) in ends {
+        for &Cap { s, x1, z1, a, inv_2a } in &self.caps {
             let (x0, z0) = (o.x * q.y + s * q.x, o.z * q.y + s * q.z);
             let b = 2.0 * (x0 * x1 + z0 * z1 - q.y * p.y);
             let cc = x0 * x0 + z0 * z0 - q.y * q.y;
-            if let Some((l, h)) = quadratic_roots(a, b, cc) {
+            if let Some((l, h)) = roots_by_centre(a, b, cc, inv_2a) {
                 caps = Some(caps.map_or((l, h), |(cl, ch)| (cl.min(l), ch.max(h))));
             }
         }
@@ -607,6 +607,54 @@ fn stored_span(lo: f64, hi: f64, width: f64) -> [f32; 2] {
     } else {
         [0.0; 2]
     }
+}
+
+/// A cylinder's cap y = c met by the rows' rays: where the ray meets the plane
+/// inside the unit circle, (o.x·d.y + s·d.x)² + (o.z·d.y + s·d.z)² ≤ d.y² with
+/// s = c − o.y and d = r + u·p, is a quadratic in u whose leading coefficient
+/// `a` = x1² + z1² − p.y² (x1 = o.x·p.y + s·p.x, z1 = o.z·p.y + s·p.z) is the same on
+/// every row.
+#[derive(Clone, Copy, Debug)]
+struct Cap {
+    s: f64,
+    x1: f64,
+    z1: f64,
+    a: f64,
+    inv_2a: f64,
+}
+
+impl Cap {
+    fn new(o: &Vector3<f64>, p: &Vector3<f64>, c: f64) -> Cap {
+        let s = c - o.y;
+        let (x1, z1) = (o.x * p.y + s * p.x, o.z * p.y + s * p.z);
+        let a = x1 * x1 + z1 * z1 - p.y * p.y;
+        Cap {
+            s,
+            x1,
+            z1,
+            a,
+            inv_2a: 0.5 / a,
+        }
+    }
+}
+
+/// The real roots of a·u² + b·u + c (a ≠ 0) in order, `inv_2a` being 1/(2a): the
+/// centre −b/2a ± the half-width √disc/2|a|, by multiplications alone (the two
+/// divisions of [`quadratic_roots`] were the longest wait of the rows' loop). Where
+/// the centre is far off (a nearly 0) the nearer root would lose digits that way:
+/// there the stable form. None when there are none.
+#[inline]
+fn roots_by_centre(a: f64, b: f64, c: f64, inv_2a: f64) -> Option<(f64, f64)> {
+    let disc = b * b - 4.0 * a * c;
+    if disc < 0.0 {
+        return None;
+    }
+    let centre = -b * inv_2a;
+    if centre.abs() > 1e7 {
+        return quadratic_roots(a, b, c);
+    }
+    let half = (disc.sqrt() * inv_2a).abs();
+    Some((centre - half, centre + half))
 }
 
 /// The real roots of a·u² + b·u + c (a ≠ 0) in order, computed stably; None when
