@@ -453,7 +453,14 @@ impl Prepared {
             return Some((lo < hi).then_some((lo, hi)));
         }
         let mut caps: Option<(f64, f64)> = None;
-        for &Cap { s, x1, z1, a, inv_2a } in &self.caps {
+        for &Cap {
+            s,
+            x1,
+            z1,
+            a,
+            inv_2a,
+        } in &self.caps
+        {
             let (x0, z0) = (o.x * q.y + s * q.x, o.z * q.y + s * q.z);
             let b = 2.0 * (x0 * x1 + z0 * z1 - q.y * p.y);
             let cc = x0 * x0 + z0 * z0 - q.y * q.y;
