@@ -218,12 +218,16 @@ struct RefitArgs {
     /// fast, less accurate.
     #[arg(long)]
     one_way: bool,
-    /// No middle pass (on by default with the second pass: each block tracked a
-    /// third time, initialised afresh on the middle one of its frames with a
-    /// person and searched from there both ways). About 1.35 times as fast, less
-    /// accurate.
+    /// No middle passes (on by default with the second pass: each block tracked
+    /// again, initialised afresh on inner frames with a person, see
+    /// --middle-starts, and searched from there both ways). Faster, less accurate.
     #[arg(long)]
     no_middle_pass: bool,
+    /// Middle passes (1 to 4, 1 by default): with n, each block's frames with a
+    /// person are cut into n + 1 equal runs and a pass starts where each run meets
+    /// the next, each about one pass's work more.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().middle_starts)]
+    middle_starts: usize,
     /// One initialisation, from the start shape (by default a second one starts
     /// from it with a round trunk, and the start that tracks the next 40 frames at
     /// the lower cost is kept). Faster to start, less accurate.
@@ -269,6 +273,9 @@ impl RefitArgs {
     fn apply(&self, track: &mut monocap::track::tracker::TrackOptions) -> Result<()> {
         track.two_way = !self.one_way;
         track.middle_pass = !self.no_middle_pass;
+        monocap::track::tracker::check_middle_starts(self.middle_starts, "--middle-starts")
+            .map_err(anyhow::Error::msg)?;
+        track.middle_starts = self.middle_starts;
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
         monocap::track::tracker::check_second_pass_window(

@@ -452,6 +452,22 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"switch_penalty": 1000.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.5}), false);
     check(serde_json::json!({"switch_penalty": -0.01}), false);
+    check(serde_json::json!({"middle_starts": 1}), true);
+    check(serde_json::json!({"middle_starts": 4}), true);
+    check(serde_json::json!({"middle_starts": 0}), false);
+    check(serde_json::json!({"middle_starts": 5}), false);
+    check(serde_json::json!({"middle_starts": 1.5}), false);
+    assert!(doc.contains("name: middle_starts"));
+    let query = JobOptions::from_query(&[("middle_starts".into(), "3".into())]).unwrap();
+    assert_eq!(query.to_track().unwrap().track.middle_starts, 3);
+    assert_eq!(
+        JobOptions::default()
+            .to_track()
+            .unwrap()
+            .track
+            .middle_starts,
+        1
+    );
     assert!(doc.contains("name: switch_penalty"));
     let query = JobOptions::from_query(&[("switch_penalty".into(), "0".into())]).unwrap();
     assert_eq!(query.to_track().unwrap().track.switch_penalty, 0.0);

@@ -131,10 +131,11 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
 fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
-    let track = |two_way: bool, middle_pass: bool, switch_penalty: f64| {
+    let track = |two_way: bool, middle_starts: usize, switch_penalty: f64| {
         let o = TrackOptions {
             two_way,
-            middle_pass,
+            middle_pass: middle_starts > 0,
+            middle_starts: middle_starts.max(1),
             switch_penalty,
             // One start: the second start's tracks of the frames after the initial
             // one (here the whole clip) would count in every run's evaluations.
@@ -148,15 +149,20 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
             .unwrap()
     };
     // Without a switch penalty each frame takes its cheapest answer.
-    let one = track(false, true, 0.0);
-    let two = track(true, false, 0.0);
-    let three = track(true, true, 0.0);
+    let one = track(false, 1, 0.0);
+    let two = track(true, 0, 0.0);
+    let three = track(true, 1, 0.0);
+    // Three middle passes: the quarter and three-quarter frames' beside the
+    // middle one's, whose answers the frames still have.
+    let five = track(true, 3, 0.0);
     // Each later pass searches every frame once more: the second doubles the
     // first's work (measured 1.98 times), the middle one adds about a third to
-    // the two passes' (1.37 times).
+    // the two passes' (1.37 times), and two more middle passes about half as much
+    // again.
     for (before, after, pass, more) in [
         (&one, &two, "the second pass", (3, 2)),
         (&two, &three, "the middle pass", (5, 4)),
+        (&three, &five, "two more middle passes", (5, 4)),
     ] {
         assert_eq!(before.shape, after.shape);
         assert!(
@@ -186,7 +192,7 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     // the first pass's track or of each frame's cheapest answer, both sequences it
     // could have taken. The penalty's unit is the median of each frame's cheapest
     // cost (here every frame shows the person, in one block).
-    let chosen = track(true, true, TrackOptions::default().switch_penalty);
+    let chosen = track(true, 1, TrackOptions::default().switch_penalty);
     assert!(masks.len() < monocap::track::tracker::TWO_WAY_BLOCK);
     assert!(three.frames.iter().all(|f| f.person));
     let mut cheapest: Vec<f64> = three.frames.iter().map(|f| f.cost.unwrap()).collect();
@@ -504,6 +510,13 @@ fn bad_input_gives_one_clear_line() {
                 bad,
             ]),
             &format!("--second-pass-window {bad}: expected 1 to 150"),
+        );
+    }
+    for bad in ["0", "5"] {
+        assert_fails_with(
+            "middle starts",
+            &monocap(&["track", s(&clip), "-o", s(&out), "--middle-starts", bad]),
+            &format!("--middle-starts {bad}: expected 1 to 4"),
         );
     }
     for bad in ["0.5", "101", "NaN"] {

@@ -6,7 +6,7 @@ use serde::{Deserialize, Serialize};
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
 use crate::track::tracker::{
-    check_refit, check_refit_again_iou, check_switch_penalty, MAX_POLISH_EVALS,
+    check_middle_starts, check_refit, check_refit_again_iou, check_switch_penalty, MAX_POLISH_EVALS,
 };
 use crate::vision::background::EmptyFrames;
 
@@ -42,11 +42,16 @@ pub struct JobOptions {
     /// is about twice as fast.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub two_way: Option<bool>,
-    /// The middle pass, beside the second one (default true; see
-    /// `TrackOptions::middle_pass`): more accurate; false is about 1.35 times as
-    /// fast.
+    /// The middle passes, beside the second one (default true; see
+    /// `TrackOptions::middle_pass` and `middle_starts`): more accurate; false is
+    /// faster.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub middle_pass: Option<bool>,
+    /// Middle passes, 1 to 4 (default 1; see `TrackOptions::middle_starts`): with
+    /// n, each block's frames with a person are cut into n + 1 equal runs and a
+    /// pass starts where each run meets the next, each about one pass's work more.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub middle_starts: Option<usize>,
     /// A second initialisation from the start shape with a round trunk, the start
     /// that tracks the next 40 frames at the lower cost kept (default true; see
     /// `TrackOptions::round_start`): more accurate; false starts faster.
@@ -192,6 +197,10 @@ impl JobOptions {
         }
         if let Some(t) = self.middle_pass {
             o.track.middle_pass = t;
+        }
+        if let Some(n) = self.middle_starts {
+            check_middle_starts(n, "middle_starts")?;
+            o.track.middle_starts = n;
         }
         if let Some(t) = self.round_start {
             o.track.round_start = t;

@@ -4,7 +4,8 @@
 //! least.
 //!
 //! The passes start from different frames and go wrong in different places, so a
-//! frame has up to three answers. Taking the cheapest answer frame by frame lets a
+//! frame has several answers (three by default: the first pass's, the second's and
+//! the middle pass's; more with more middle passes). Taking the cheapest answer frame by frame lets a
 //! wrong pose that happens to cost a little less on one frame break into a track
 //! that is right on its neighbours; the answers the passes swap are often far apart
 //! (the heading turned by more than 40°). Charging each step from one frame's
