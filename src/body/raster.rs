@@ -324,6 +324,12 @@ impl Prepared {
                 o.x * o.x + o.z * o.z - 1.0,
             ),
         };
+        let a = op * op - k * pp;
+        // Only a cylinder has caps (an ellipsoid's are never read).
+        let caps = match part.kind {
+            Kind::Cylinder => [Cap::new(&o, &p, 0.0), Cap::new(&o, &p, 1.0)],
+            Kind::Ellipsoid => [Cap::default(); 2],
+        };
         Some(Prepared {
             kind: part.kind,
             o,
@@ -332,9 +338,9 @@ impl Prepared {
             q: -m.column(1) / cam.fy,
             op,
             k,
-            a: op * op - k * pp,
-            inv_2a: 0.5 / (op * op - k * pp),
-            caps: [Cap::new(&o, &p, 0.0), Cap::new(&o, &p, 1.0)],
+            a,
+            inv_2a: 0.5 / a,
+            caps,
             x0,
             x1,
             y0,
@@ -621,7 +627,7 @@ fn stored_span(lo: f64, hi: f64, width: f64) -> [f32; 2] {
 /// s = c − o.y and d = r + u·p, is a quadratic in u whose leading coefficient
 /// `a` = x1² + z1² − p.y² (x1 = o.x·p.y + s·p.x, z1 = o.z·p.y + s·p.z) is the same on
 /// every row.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 struct Cap {
     s: f64,
     x1: f64,

@@ -5,15 +5,15 @@
 //!
 //! The passes start from different frames and go wrong in different places, so a
 //! frame has several answers (three by default: the first pass's, the second's and
-//! the middle pass's; more with more middle passes). Taking the cheapest answer frame by frame lets a
-//! wrong pose that happens to cost a little less on one frame break into a track
-//! that is right on its neighbours; the answers the passes swap are often far apart
-//! (the heading turned by more than 40°). Charging each step from one frame's
-//! answer to the next's for the distance between the two poses keeps a pass's
-//! track where it is only a little dearer, and still moves to another pass's track
-//! where that is cheaper over a run of frames. The choice is a shortest path
-//! through the frames' answers (the Viterbi algorithm): with three answers a frame,
-//! nine distances a frame, and no evaluation of the objective.
+//! the middle pass's; more with more middle passes). Taking the cheapest answer
+//! frame by frame lets a wrong pose that happens to cost a little less on one frame
+//! break into a track that is right on its neighbours; the answers the passes swap
+//! are often far apart (the heading turned by more than 40°). Charging each step
+//! from one frame's answer to the next's for the distance between the two poses
+//! keeps a pass's track where it is only a little dearer, and still moves to
+//! another pass's track where that is cheaper over a run of frames. The choice is a
+//! shortest path through the frames' answers (the Viterbi algorithm): with three
+//! answers a frame, nine distances a frame, and no evaluation of the objective.
 //!
 //! [`TrackOptions::two_way`]: super::tracker::TrackOptions::two_way
 //! [`TrackOptions::middle_pass`]: super::tracker::TrackOptions::middle_pass
