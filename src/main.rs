@@ -228,6 +228,12 @@ struct RefitArgs {
     /// the next, each about one pass's work more.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().middle_starts)]
     middle_starts: usize,
+    /// Middle passes in all on a block whose passes part (0 to 4; 0, or no more
+    /// than --middle-starts: never): where a middle pass's answers lie apart from
+    /// the backwards pass's, the block is given this many, as --middle-starts would
+    /// start them.
+    #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().parted_middle_starts)]
+    parted_middle_starts: usize,
     /// One initialisation, from the start shape (by default a second one starts
     /// from it with a round trunk, and the start that tracks the next 40 frames at
     /// the lower cost is kept). Faster to start, less accurate.
@@ -276,6 +282,12 @@ impl RefitArgs {
         monocap::track::tracker::check_middle_starts(self.middle_starts, "--middle-starts")
             .map_err(anyhow::Error::msg)?;
         track.middle_starts = self.middle_starts;
+        monocap::track::tracker::check_parted_middle_starts(
+            self.parted_middle_starts,
+            "--parted-middle-starts",
+        )
+        .map_err(anyhow::Error::msg)?;
+        track.parted_middle_starts = self.parted_middle_starts;
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
         monocap::track::tracker::check_second_pass_window(

@@ -468,6 +468,21 @@ fn documented_option_limits_are_the_services() {
             .middle_starts,
         1
     );
+    check(serde_json::json!({"parted_middle_starts": 0}), true);
+    check(serde_json::json!({"parted_middle_starts": 4}), true);
+    check(serde_json::json!({"parted_middle_starts": 5}), false);
+    check(serde_json::json!({"parted_middle_starts": -1}), false);
+    assert!(doc.contains("name: parted_middle_starts"));
+    let query = JobOptions::from_query(&[("parted_middle_starts".into(), "3".into())]).unwrap();
+    assert_eq!(query.to_track().unwrap().track.parted_middle_starts, 3);
+    assert_eq!(
+        JobOptions::default()
+            .to_track()
+            .unwrap()
+            .track
+            .parted_middle_starts,
+        monocap::track::tracker::TrackOptions::default().parted_middle_starts
+    );
     assert!(doc.contains("name: switch_penalty"));
     let query = JobOptions::from_query(&[("switch_penalty".into(), "0".into())]).unwrap();
     assert_eq!(query.to_track().unwrap().track.switch_penalty, 0.0);

@@ -14,7 +14,9 @@ use monocap::motion::bvh::Bvh;
 use monocap::motion::json::MotionJson;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
 use monocap::track::metrics;
-use monocap::track::tracker::{FrameInput, Track, TrackOptions, TrackedFrame, Tracker};
+use monocap::track::tracker::{
+    FrameInput, Track, TrackOptions, TrackedFrame, Tracker, PARTED_SHARE,
+};
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
 
@@ -131,11 +133,14 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
 fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
-    let track = |two_way: bool, middle_starts: usize, switch_penalty: f64| {
+    let track_parted = |two_way: bool, middle_starts: usize, switch_penalty: f64, parted| {
+        let (parted_middle_starts, parted_share) = parted;
         let o = TrackOptions {
             two_way,
             middle_pass: middle_starts > 0,
             middle_starts: middle_starts.max(1),
+            parted_middle_starts,
+            parted_share,
             switch_penalty,
             // One start: the second start's tracks of the frames after the initial
             // one (here the whole clip) would count in every run's evaluations.
@@ -147,6 +152,9 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
                 ControlFlow::Continue(())
             })
             .unwrap()
+    };
+    let track = |two_way, middle_starts, switch_penalty| {
+        track_parted(two_way, middle_starts, switch_penalty, (0, PARTED_SHARE))
     };
     // Without a switch penalty each frame takes its cheapest answer.
     let one = track(false, 1, 0.0);
@@ -187,6 +195,27 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
             before.timing.evals
         );
     }
+    // Three middle passes where the passes part: the block is tracked as with one
+    // middle pass or as with three from the outset, frame for frame (the passes
+    // taken in the same order), whichever it was given; on every block with a
+    // share below 0, as with three.
+    let parted = track_parted(true, 1, 0.0, (3, PARTED_SHARE));
+    let given = match parted.timing.evals {
+        e if e == three.timing.evals => &three,
+        e if e == five.timing.evals => &five,
+        e => panic!(
+            "{e} evaluations with three middle passes where the passes part, against {} and {}",
+            three.timing.evals, five.timing.evals
+        ),
+    };
+    assert_eq!(parted.frames, given.frames);
+    println!(
+        "three middle passes where the passes part: tracked as with {}",
+        if std::ptr::eq(given, &five) { 3 } else { 1 }
+    );
+    let always = track_parted(true, 1, 0.0, (3, -1.0));
+    assert_eq!(always.timing.evals, five.timing.evals);
+    assert_eq!(always.frames, five.frames);
     // With the default penalty the frames take the sequence of answers whose
     // costs plus the penalty for its moves are the least: no more than those of
     // the first pass's track or of each frame's cheapest answer, both sequences it
@@ -512,6 +541,18 @@ fn bad_input_gives_one_clear_line() {
             &format!("--second-pass-window {bad}: expected 1 to 150"),
         );
     }
+    assert_fails_with(
+        "parted middle starts",
+        &monocap(&[
+            "track",
+            s(&clip),
+            "-o",
+            s(&out),
+            "--parted-middle-starts",
+            "5",
+        ]),
+        "--parted-middle-starts 5: expected 0 (never) to 4",
+    );
     for bad in ["0", "5"] {
         assert_fails_with(
             "middle starts",

@@ -6,7 +6,8 @@ use serde::{Deserialize, Serialize};
 use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
 use crate::track::tracker::{
-    check_middle_starts, check_refit, check_refit_again_iou, check_switch_penalty, MAX_POLISH_EVALS,
+    check_middle_starts, check_parted_middle_starts, check_refit, check_refit_again_iou,
+    check_switch_penalty, MAX_POLISH_EVALS,
 };
 use crate::vision::background::EmptyFrames;
 
@@ -52,6 +53,12 @@ pub struct JobOptions {
     /// pass starts where each run meets the next, each about one pass's work more.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub middle_starts: Option<usize>,
+    /// Middle passes in all on a block whose passes part, 0 to 4 (default 0,
+    /// never; see `TrackOptions::parted_middle_starts`): where a middle pass's
+    /// answers lie apart from the backwards pass's, the block is given this many,
+    /// started as `middle_starts` would start them.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub parted_middle_starts: Option<usize>,
     /// A second initialisation from the start shape with a round trunk, the start
     /// that tracks the next 40 frames at the lower cost kept (default true; see
     /// `TrackOptions::round_start`): more accurate; false starts faster.
@@ -201,6 +208,10 @@ impl JobOptions {
         if let Some(n) = self.middle_starts {
             check_middle_starts(n, "middle_starts")?;
             o.track.middle_starts = n;
+        }
+        if let Some(n) = self.parted_middle_starts {
+            check_parted_middle_starts(n, "parted_middle_starts")?;
+            o.track.parted_middle_starts = n;
         }
         if let Some(t) = self.round_start {
             o.track.round_start = t;

@@ -19,7 +19,10 @@
 //! [`TrackOptions::middle_pass`]: super::tracker::TrackOptions::middle_pass
 
 use super::tracker::TrackedFrame;
+use crate::body::camera::Camera;
 use crate::body::params::{ix, Pose, MOTION, MOTION_COUNT};
+use crate::body::skeleton::Joint;
+use crate::body::Body;
 
 /// How far apart two poses are: the sum over the 30 values of each difference in
 /// its length scale (the heading's taken the short way round).
@@ -34,6 +37,38 @@ pub fn distance(a: &Pose, b: &Pose) -> f64 {
             d / MOTION[k].scale
         })
         .sum()
+}
+
+/// How far two passes' answers for the same frames part: the mean, over the frames
+/// where both found a person, of the share of the joints whose image positions lie
+/// more than a tenth of the body's image height apart (the height spanned by the
+/// joints of `a`'s pose; a joint behind the camera in either counts as apart). 0
+/// when no frame has a person in both.
+pub fn apart(body: &Body, camera: &Camera, a: &[TrackedFrame], b: &[TrackedFrame]) -> f64 {
+    let image = |pose: &Pose| {
+        let posed = body.posed(pose);
+        Joint::ALL.map(|j| camera.project(&posed.joint(j)))
+    };
+    let mut shares = Vec::new();
+    for (x, y) in a.iter().zip(b).filter(|(x, y)| x.person && y.person) {
+        let (p, q) = (image(&x.pose), image(&y.pose));
+        let (lo, hi) = p
+            .iter()
+            .flatten()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| {
+                (lo.min(v[1]), hi.max(v[1]))
+            });
+        let near = 0.1 * (hi - lo);
+        let far = p.iter().zip(&q).filter(|(u, v)| match (u, v) {
+            (Some(u), Some(v)) => (u[0] - v[0]).hypot(u[1] - v[1]) > near,
+            _ => true,
+        });
+        shares.push(far.count() as f64 / Joint::ALL.len() as f64);
+    }
+    match shares.len() {
+        0 => 0.0,
+        n => shares.iter().sum::<f64>() / n as f64,
+    }
 }
 
 /// An answer the choice may take: a person found, at a finite cost.
@@ -134,6 +169,48 @@ mod tests {
             .enumerate()
             .map(|(i, &(a, b))| vec![answer(i, 0.0, a), answer(i, 10.0, b)])
             .collect()
+    }
+
+    #[test]
+    fn passes_part_where_their_joints_lie_apart_in_the_image() {
+        use crate::body::params::{rest_pose, STANDARD_SHAPE};
+        let body = Body::new(&STANDARD_SHAPE);
+        let cam = Camera::new(320, 240, 55.0);
+        let mut pose = rest_pose();
+        pose[ix::ROOT_TY] -= 100.0;
+        pose[ix::ROOT_TZ] = -400.0;
+        let track = |pose: Pose| -> Vec<TrackedFrame> {
+            (0..4)
+                .map(|i| TrackedFrame {
+                    pose,
+                    ..answer(i, 0.0, 1.0)
+                })
+                .collect()
+        };
+        let a = track(pose);
+        assert_eq!(apart(&body, &cam, &a, &a), 0.0);
+        // The left arm raised and bent: its elbow and wrist (and no other joint)
+        // move by more than a tenth of the body's height.
+        let mut raised = pose;
+        raised[ix::L_SHOULDER + 1] = 90.0;
+        raised[ix::L_ELBOW] = 90.0;
+        let b = track(raised);
+        let share = apart(&body, &cam, &a, &b);
+        assert!(share > 0.0 && share < 0.25, "{share}");
+        // Frames where either has no person do not count; with none left, 0.
+        let mut c = b.clone();
+        c[0].person = false;
+        c[1] = TrackedFrame { pose, ..c[1] };
+        c[1].person = false;
+        assert_eq!(apart(&body, &cam, &a, &c), share);
+        let none: Vec<TrackedFrame> = c
+            .iter()
+            .map(|f| TrackedFrame {
+                person: false,
+                ..*f
+            })
+            .collect();
+        assert_eq!(apart(&body, &cam, &a, &none), 0.0);
     }
 
     #[test]

@@ -249,6 +249,22 @@ pub fn check_middle_starts(n: usize, name: &str) -> Result<(), String> {
     Ok(())
 }
 
+/// The default of [`TrackOptions::parted_share`]: a block's later passes part when
+/// a middle pass's answers lie more than a tenth of the body's image height from
+/// the backwards pass's on over this share of the joints (the mean over the
+/// frames).
+pub const PARTED_SHARE: f64 = 0.05;
+
+/// Checks a [`TrackOptions::parted_middle_starts`], named `name` in the message.
+pub fn check_parted_middle_starts(n: usize, name: &str) -> Result<(), String> {
+    if n > MAX_MIDDLE_STARTS {
+        return Err(format!(
+            "{name} {n}: expected 0 (never) to {MAX_MIDDLE_STARTS}"
+        ));
+    }
+    Ok(())
+}
+
 /// Frames handed to the refit's helper thread before the tracker waits for it:
 /// enough for the frames up to the initial one in most clips, which come all at
 /// once (with a queue of 4 the search of the walk seen from 60° waited for the
@@ -449,6 +465,24 @@ pub struct TrackOptions {
     /// runs of the six, for 1.45 times the CPU time (README, "More middle
     /// passes"): not the default, which keeps the speed target.
     pub middle_starts: usize,
+    /// Middle passes on a block whose passes part: where, after the backwards
+    /// pass and the [`TrackOptions::middle_starts`] middle passes, a middle pass's
+    /// answers lie apart from the backwards pass's ([`PARTED_SHARE`]), the block is
+    /// given this many middle passes in all, as [`TrackOptions::middle_starts`]
+    /// would start them (the passes already run are not run again), so it comes out
+    /// as with that many from the outset. 0, or no more than `middle_starts`:
+    /// never. With 3, on the accuracy benchmark's two runs of seed 1, the passes
+    /// parted on 18 of 27 clips in each, and PCK@0.1 was 0.961 and 0.962 (0.957 and
+    /// 0.958 by default, the same with three middle passes everywhere), at an
+    /// estimated 1.3 times the default's CPU time: not the default (README,
+    /// "Middle passes where the passes part").
+    pub parted_middle_starts: usize,
+    /// When a block's passes part ([`TrackOptions::parted_middle_starts`]): a
+    /// middle pass's answers put more than this share of the joints more than a
+    /// tenth of the body's image height from the backwards pass's (the mean over
+    /// the block's frames, [`super::merge::apart`]); [`PARTED_SHARE`] by default,
+    /// below 0 on every block.
+    pub parted_share: f64,
     /// How each frame chooses among the passes' answers ([`super::merge::choose`]):
     /// over each block, the sequence with the least summed cost plus this many
     /// times the median frame's cost for each length scale a pose moves from one
@@ -560,6 +594,8 @@ impl Default for TrackOptions {
             second_pass_window: 1,
             middle_pass: true,
             middle_starts: 1,
+            parted_middle_starts: 0,
+            parted_share: PARTED_SHARE,
             switch_penalty: SWITCH_PENALTY,
             init_frame: None,
             init_window: 60,
@@ -1135,10 +1171,25 @@ impl Tracker {
         (search, frame)
     }
 
+    /// Whether a block's later passes part ([`TrackOptions::parted_middle_starts`]):
+    /// some middle pass's answers lie apart from the backwards pass's on more than
+    /// [`TrackOptions::parted_share`] of the joints ([`super::merge::apart`]). False
+    /// when the backwards pass failed.
+    fn passes_part(&self, body: &Body, passes: &[BlockResult]) -> bool {
+        let Some(Ok((last, _))) = passes.first() else {
+            return false;
+        };
+        passes[1..]
+            .iter()
+            .filter_map(|p| p.as_ref().ok())
+            .any(|(f, _)| super::merge::apart(body, &self.camera, last, f) > self.opts.parted_share)
+    }
+
     /// The passes after the first over one block of frames
     /// ([`TrackOptions::two_way`]; the targets of frames `from`, `from` + 1, …): the
-    /// backwards pass, and the middle pass ([`TrackOptions::middle_pass`]) side by
-    /// side with it when there are two threads or more. Their answers for the
+    /// backwards pass, and the middle passes ([`TrackOptions::middle_pass`]) side by
+    /// side with it when there are two threads or more; then, where they part
+    /// ([`TrackOptions::parted_middle_starts`]), more middle passes. Their answers for the
     /// block's frames up to its last one with a person (none when the block has no
     /// person), in frame order and, for each frame, in the passes' order; and the
     /// evaluations spent.
@@ -1156,9 +1207,26 @@ impl Tracker {
             true => std::iter::once(BlockStart::Last).chain(middles).collect(),
             false => vec![BlockStart::Last],
         };
-        let passes = par_map(&starts, self.threads(), |&start| {
-            self.block_pass(body, shape, from, targets.clone(), abort, start)
-        });
+        let run = |starts: &[BlockStart]| {
+            par_map(starts, self.threads(), |&start| {
+                self.block_pass(body, shape, from, targets.clone(), abort, start)
+            })
+        };
+        let mut passes = run(&starts);
+        let more = self.opts.parted_middle_starts;
+        if self.opts.middle_pass && more > n && self.passes_part(body, &passes) {
+            let extra: Vec<BlockStart> = (1..=more)
+                .map(|k| BlockStart::Inner(k, more + 1))
+                .filter(|s| !starts.iter().any(|t| s.same_as(t)))
+                .collect();
+            passes.extend(run(&extra));
+            let starts = starts.into_iter().chain(extra);
+            // The passes in the order of their starts through the block, the
+            // backwards pass first: as many middle passes from the outset would be.
+            let mut paired: Vec<(BlockStart, BlockResult)> = starts.zip(passes).collect();
+            paired.sort_by(|a, b| a.0.order(&b.0));
+            passes = paired.into_iter().map(|(_, pass)| pass).collect();
+        }
         let mut answers = Vec::new();
         let mut spent = 0;
         for pass in passes {
@@ -2310,6 +2378,24 @@ enum BlockStart {
     /// person ([`TrackOptions::middle_pass`], [`TrackOptions::middle_starts`]);
     /// `Inner(1, 2)` is the middle one.
     Inner(usize, usize),
+}
+
+impl BlockStart {
+    /// Whether the two start at the same point of every block.
+    fn same_as(&self, other: &BlockStart) -> bool {
+        self.order(other) == std::cmp::Ordering::Equal
+    }
+
+    /// The order of two starts: [`BlockStart::Last`] first, then the inner ones by
+    /// how far through the block they lie.
+    fn order(&self, other: &BlockStart) -> std::cmp::Ordering {
+        match (self, other) {
+            (BlockStart::Last, BlockStart::Last) => std::cmp::Ordering::Equal,
+            (BlockStart::Last, _) => std::cmp::Ordering::Less,
+            (_, BlockStart::Last) => std::cmp::Ordering::Greater,
+            (&BlockStart::Inner(k, n), &BlockStart::Inner(l, m)) => (k * m).cmp(&(l * n)),
+        }
+    }
 }
 
 /// Whether a frame's cost is a spike: over `k` times the median of the earlier
