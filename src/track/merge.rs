@@ -189,8 +189,8 @@ mod tests {
         };
         let a = track(pose);
         assert_eq!(apart(&body, &cam, &a, &a), 0.0);
-        // The left arm raised and bent: its elbow and wrist (and no other joint)
-        // move by more than a tenth of the body's height.
+        // The left arm raised and bent: some of the joints, far from most, move by
+        // more than a tenth of the body's height.
         let mut raised = pose;
         raised[ix::L_SHOULDER + 1] = 90.0;
         raised[ix::L_ELBOW] = 90.0;

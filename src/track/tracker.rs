@@ -1189,10 +1189,10 @@ impl Tracker {
     /// ([`TrackOptions::two_way`]; the targets of frames `from`, `from` + 1, …): the
     /// backwards pass, and the middle passes ([`TrackOptions::middle_pass`]) side by
     /// side with it when there are two threads or more; then, where they part
-    /// ([`TrackOptions::parted_middle_starts`]), more middle passes. Their answers for the
-    /// block's frames up to its last one with a person (none when the block has no
-    /// person), in frame order and, for each frame, in the passes' order; and the
-    /// evaluations spent.
+    /// ([`TrackOptions::parted_middle_starts`]), more middle passes. Their answers
+    /// for the block's frames up to its last one with a person (none when the block
+    /// has no person), in frame order and, for each frame, in the passes' order;
+    /// and the evaluations spent.
     fn block_passes(
         &self,
         body: &Body,
