@@ -230,10 +230,15 @@ struct RefitArgs {
     middle_starts: usize,
     /// Middle passes in all on a block whose passes part (0 to 4; 0, or no more
     /// than --middle-starts: never): where a middle pass's answers lie apart from
-    /// the backwards pass's, the block is given this many, as --middle-starts would
+    /// the backwards pass's on over 5% of the joints and no more than
+    /// --parted-share-max, the block is given this many, as --middle-starts would
     /// start them.
     #[arg(long, default_value_t = monocap::track::tracker::TrackOptions::default().parted_middle_starts)]
     parted_middle_starts: usize,
+    /// The most of the joints a middle pass may put apart for its block to be given
+    /// --parted-middle-starts (above 0.05, 1 at most: no bound).
+    #[arg(long, default_value_t = monocap::track::tracker::PARTED_SHARE_MAX)]
+    parted_share_max: f64,
     /// One initialisation, from the start shape (by default a second one starts
     /// from it with a round trunk, and the start that tracks the next 40 frames at
     /// the lower cost is kept). Faster to start, less accurate.
@@ -288,6 +293,12 @@ impl RefitArgs {
         )
         .map_err(anyhow::Error::msg)?;
         track.parted_middle_starts = self.parted_middle_starts;
+        monocap::track::tracker::check_parted_share_max(
+            self.parted_share_max,
+            "--parted-share-max",
+        )
+        .map_err(anyhow::Error::msg)?;
+        track.parted_share_max = self.parted_share_max;
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
         monocap::track::tracker::check_second_pass_window(

@@ -15,10 +15,13 @@ use monocap::motion::json::MotionJson;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
 use monocap::track::metrics;
 use monocap::track::tracker::{
-    FrameInput, Track, TrackOptions, TrackedFrame, Tracker, PARTED_SHARE,
+    FrameInput, Track, TrackOptions, TrackedFrame, Tracker, PARTED_SHARE, PARTED_SHARE_MAX,
 };
 
 const FIXTURE: &str = "tests/fixtures/bandai_run_normal_001_20f.bvh";
+
+/// The tracker's band of shares within which a block's passes part.
+const DEFAULT_BAND: (f64, f64) = (PARTED_SHARE, PARTED_SHARE_MAX);
 
 /// The fixture's run as a silhouette clip: its masks, truth and options.
 fn run_masks() -> (Vec<Mask>, monocap::synth::Truth, SynthOptions) {
@@ -134,13 +137,14 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     let (masks, _, opts) = run_masks();
     let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
     let track_parted = |two_way: bool, middle_starts: usize, switch_penalty: f64, parted| {
-        let (parted_middle_starts, parted_share) = parted;
+        let (parted_middle_starts, (parted_share, parted_share_max)) = parted;
         let o = TrackOptions {
             two_way,
             middle_pass: middle_starts > 0,
             middle_starts: middle_starts.max(1),
             parted_middle_starts,
             parted_share,
+            parted_share_max,
             switch_penalty,
             // One start: the second start's tracks of the frames after the initial
             // one (here the whole clip) would count in every run's evaluations.
@@ -154,7 +158,7 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
             .unwrap()
     };
     let track = |two_way, middle_starts, switch_penalty| {
-        track_parted(two_way, middle_starts, switch_penalty, (0, PARTED_SHARE))
+        track_parted(two_way, middle_starts, switch_penalty, (0, DEFAULT_BAND))
     };
     // Without a switch penalty each frame takes its cheapest answer.
     let one = track(false, 1, 0.0);
@@ -197,9 +201,9 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
     }
     // Three middle passes where the passes part: the block is tracked as with one
     // middle pass or as with three from the outset, frame for frame (the passes
-    // taken in the same order), whichever it was given; on every block with a
-    // share below 0, as with three.
-    let parted = track_parted(true, 1, 0.0, (3, PARTED_SHARE));
+    // taken in the same order), whichever it was given; on every block with the
+    // band's lower end below 0 and no upper bound, as with three.
+    let parted = track_parted(true, 1, 0.0, (3, DEFAULT_BAND));
     let given = match parted.timing.evals {
         e if e == three.timing.evals => &three,
         e if e == five.timing.evals => &five,
@@ -213,9 +217,14 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
         "three middle passes where the passes part: tracked as with {}",
         if std::ptr::eq(given, &five) { 3 } else { 1 }
     );
-    let always = track_parted(true, 1, 0.0, (3, -1.0));
+    let always = track_parted(true, 1, 0.0, (3, (-1.0, 1.0)));
     assert_eq!(always.timing.evals, five.timing.evals);
     assert_eq!(always.frames, five.frames);
+    // Passes parted by more than the bound are not given more middle passes: with
+    // a bound below 0 no block is.
+    let bounded = track_parted(true, 1, 0.0, (3, (-1.0, -0.5)));
+    assert_eq!(bounded.timing.evals, three.timing.evals);
+    assert_eq!(bounded.frames, three.frames);
     // With the default penalty the frames take the sequence of answers whose
     // costs plus the penalty for its moves are the least: no more than those of
     // the first pass's track or of each frame's cheapest answer, both sequences it
@@ -553,6 +562,13 @@ fn bad_input_gives_one_clear_line() {
         ]),
         "--parted-middle-starts 5: expected 0 (never) to 4",
     );
+    for bad in ["0.05", "1.5", "NaN"] {
+        assert_fails_with(
+            "parted share bound",
+            &monocap(&["track", s(&clip), "-o", s(&out), "--parted-share-max", bad]),
+            &format!("--parted-share-max {bad}: expected a share above 0.05, 1 at most (no bound)"),
+        );
+    }
     for bad in ["0", "5"] {
         assert_fails_with(
             "middle starts",

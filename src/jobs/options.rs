@@ -55,8 +55,9 @@ pub struct JobOptions {
     pub middle_starts: Option<usize>,
     /// Middle passes in all on a block whose passes part, 0 to 4 (default 0,
     /// never; see `TrackOptions::parted_middle_starts`): where a middle pass's
-    /// answers lie apart from the backwards pass's, the block is given this many,
-    /// started as `middle_starts` would start them.
+    /// answers lie apart from the backwards pass's, but not far apart over most of
+    /// the block, the block is given this many, started as `middle_starts` would
+    /// start them.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub parted_middle_starts: Option<usize>,
     /// A second initialisation from the start shape with a round trunk, the start

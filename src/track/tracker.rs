@@ -255,6 +255,26 @@ pub fn check_middle_starts(n: usize, name: &str) -> Result<(), String> {
 /// frames).
 pub const PARTED_SHARE: f64 = 0.05;
 
+/// The default of [`TrackOptions::parted_share_max`]: passes whose answers lie
+/// apart on more than this share of the joints (one of them turned another way,
+/// or a leg crossed to the other side, over the block) are not given more middle
+/// passes. A price paid for speed: over three runs of the accuracy benchmark
+/// (81 clips), more middle passes within the bound kept 0.007 of the 0.008 of
+/// PCK@0.1 that they gained on every clip, for half their extra CPU time
+/// (README, "Middle passes where the passes part a little").
+pub const PARTED_SHARE_MAX: f64 = 0.3;
+
+/// Checks a [`TrackOptions::parted_share_max`], named `name` in the message: a
+/// share above [`PARTED_SHARE`], 1 at most (no bound).
+pub fn check_parted_share_max(share: f64, name: &str) -> Result<(), String> {
+    if !(share > PARTED_SHARE && share <= 1.0) {
+        return Err(format!(
+            "{name} {share}: expected a share above {PARTED_SHARE}, 1 at most (no bound)"
+        ));
+    }
+    Ok(())
+}
+
 /// Checks a [`TrackOptions::parted_middle_starts`], named `name` in the message.
 pub fn check_parted_middle_starts(n: usize, name: &str) -> Result<(), String> {
     if n > MAX_MIDDLE_STARTS {
@@ -467,22 +487,29 @@ pub struct TrackOptions {
     pub middle_starts: usize,
     /// Middle passes on a block whose passes part: where, after the backwards
     /// pass and the [`TrackOptions::middle_starts`] middle passes, a middle pass's
-    /// answers lie apart from the backwards pass's ([`PARTED_SHARE`]), the block is
-    /// given this many middle passes in all, as [`TrackOptions::middle_starts`]
-    /// would start them (the passes already run are not run again), so it comes out
-    /// as with that many from the outset. 0, or no more than `middle_starts`:
-    /// never. With 3, on the accuracy benchmark's two runs of seed 1, the passes
-    /// parted on 18 of 27 clips in each, and PCK@0.1 was 0.961 and 0.962 (0.957 and
-    /// 0.958 by default, the same with three middle passes everywhere), at an
-    /// estimated 1.3 times the default's CPU time: not the default (README,
-    /// "Middle passes where the passes part").
+    /// answers lie apart from the backwards pass's ([`PARTED_SHARE`], no more than
+    /// [`PARTED_SHARE_MAX`]), the block is given this many middle passes in all, as
+    /// [`TrackOptions::middle_starts`] would start them (the passes already run are
+    /// not run again), so it comes out as with that many from the outset. 0, or no
+    /// more than `middle_starts`: never. With 3, over three runs of the accuracy
+    /// benchmark (seed 2 with a lead-in and without, seed 3 without), PCK@0.1 0.947
+    /// and PA-MPJPE 67.2 mm against 0.940 and 69.7 by default and 0.948 and 66.9
+    /// with three middle passes everywhere, at an estimated 1.23 times the
+    /// default's CPU time: not the default (README, "Middle passes where the
+    /// passes part a little").
     pub parted_middle_starts: usize,
     /// When a block's passes part ([`TrackOptions::parted_middle_starts`]): a
     /// middle pass's answers put more than this share of the joints more than a
     /// tenth of the body's image height from the backwards pass's (the mean over
-    /// the block's frames, [`super::merge::apart`]); [`PARTED_SHARE`] by default,
-    /// below 0 on every block.
+    /// the block's frames, [`super::merge::apart`]), and no more than
+    /// [`TrackOptions::parted_share_max`]; [`PARTED_SHARE`] by default, below 0 on
+    /// every block the bound lets through.
     pub parted_share: f64,
+    /// The most of the joints a middle pass's answers may put apart from the
+    /// backwards pass's for the block to be given more middle passes
+    /// ([`TrackOptions::parted_share`]); [`PARTED_SHARE_MAX`] by default, 1 or
+    /// more for no bound.
+    pub parted_share_max: f64,
     /// How each frame chooses among the passes' answers ([`super::merge::choose`]):
     /// over each block, the sequence with the least summed cost plus this many
     /// times the median frame's cost for each length scale a pose moves from one
@@ -596,6 +623,7 @@ impl Default for TrackOptions {
             middle_starts: 1,
             parted_middle_starts: 0,
             parted_share: PARTED_SHARE,
+            parted_share_max: PARTED_SHARE_MAX,
             switch_penalty: SWITCH_PENALTY,
             init_frame: None,
             init_window: 60,
@@ -1173,16 +1201,19 @@ impl Tracker {
 
     /// Whether a block's later passes part ([`TrackOptions::parted_middle_starts`]):
     /// some middle pass's answers lie apart from the backwards pass's on more than
-    /// [`TrackOptions::parted_share`] of the joints ([`super::merge::apart`]). False
-    /// when the backwards pass failed.
+    /// [`TrackOptions::parted_share`] of the joints and no more than
+    /// [`TrackOptions::parted_share_max`] ([`super::merge::apart`]). False when the
+    /// backwards pass failed.
     fn passes_part(&self, body: &Body, passes: &[BlockResult]) -> bool {
         let Some(Ok((last, _))) = passes.first() else {
             return false;
         };
+        let (lo, hi) = (self.opts.parted_share, self.opts.parted_share_max);
         passes[1..]
             .iter()
             .filter_map(|p| p.as_ref().ok())
-            .any(|(f, _)| super::merge::apart(body, &self.camera, last, f) > self.opts.parted_share)
+            .map(|(f, _)| super::merge::apart(body, &self.camera, last, f))
+            .any(|share| share > lo && share <= hi)
     }
 
     /// The passes after the first over one block of frames
