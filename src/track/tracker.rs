@@ -255,12 +255,11 @@ pub fn check_middle_starts(n: usize, name: &str) -> Result<(), String> {
 /// frames).
 pub const PARTED_SHARE: f64 = 0.05;
 
-/// The default of [`TrackOptions::parted_share_max`]: passes whose answers lie
-/// apart on more than this share of the joints (one of them turned another way,
-/// or a leg crossed to the other side, over the block) are not given more middle
-/// passes. A price paid for speed: over three runs of the accuracy benchmark
-/// (81 clips), more middle passes within the bound kept 0.007 of the 0.008 of
-/// PCK@0.1 that they gained on every clip, for half their extra CPU time
+/// The default of [`TrackOptions::parted_share_max`]: passes whose answers lie apart on
+/// more than this share of the joints (one of them far off over much of the block) are
+/// not given more middle passes. A price paid for speed: over three runs of the
+/// accuracy benchmark (81 clips), more middle passes within the bound kept 0.007 of the
+/// 0.008 of PCK@0.1 that they gained on every clip, for half their extra CPU time
 /// (README, "Middle passes where the passes part a little").
 pub const PARTED_SHARE_MAX: f64 = 0.3;
 
