@@ -173,6 +173,12 @@ struct WeightArgs {
     /// from motion capture); 0 for none
     #[arg(long, default_value_t = monocap::track::objective::PRIOR_WEIGHT)]
     w_prior: f64,
+    /// While tracking, how far (a fraction of the person's height) a model hand,
+    /// foot or head top may lie from every candidate of its kind and still be
+    /// pulled to one; farther, it pays this distance (0 to 1; 0: no bound, the
+    /// paper's term)
+    #[arg(long, default_value_t = monocap::track::objective::EXTREMITY_REACH)]
+    extremity_reach: f64,
 }
 
 impl WeightArgs {
@@ -186,6 +192,7 @@ impl WeightArgs {
             ("--w-shading", self.w_shading),
             ("--w-skin", self.w_skin),
             ("--w-prior", self.w_prior),
+            ("--extremity-reach", self.extremity_reach),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
@@ -204,7 +211,15 @@ impl WeightArgs {
         w.shading = self.w_shading;
         w.skin = self.w_skin;
         w.smooth = !self.whole_pixels;
+        let max = monocap::track::objective::MAX_EXTREMITY_REACH;
+        if self.extremity_reach > max {
+            anyhow::bail!(
+                "--extremity-reach {}: expected at most {max}",
+                self.extremity_reach
+            );
+        }
         w.prior = self.w_prior;
+        w.extremity_reach = self.extremity_reach;
         Ok(())
     }
 }

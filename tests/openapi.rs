@@ -519,6 +519,10 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"w_edge": -1.0}), false);
     check(serde_json::json!({"reward_rim": 2.0}), true);
     check(serde_json::json!({"reward_rim": -0.5}), false);
+    check(serde_json::json!({"extremity_reach": 0.05}), true);
+    check(serde_json::json!({"extremity_reach": 1.0}), true);
+    check(serde_json::json!({"extremity_reach": 1.5}), false);
+    check(serde_json::json!({"extremity_reach": -0.1}), false);
     check(serde_json::json!({"track_rewards": true}), true);
     check(serde_json::json!({"track_rewards": 1}), false);
     check(serde_json::json!({"no_such_option": 1}), false);

@@ -103,6 +103,11 @@ pub struct JobOptions {
     /// `Weights::prior`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub w_prior: Option<f64>,
+    /// While tracking, how far (a fraction of the person's height) a model hand,
+    /// foot or head top may lie from every candidate of its kind and still be
+    /// pulled to one (default 0, no bound; see `Weights::extremity_reach`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub extremity_reach: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -238,6 +243,11 @@ impl JobOptions {
             ("w_shading", self.w_shading, &mut w.shading),
             ("w_skin", self.w_skin, &mut w.skin),
             ("w_prior", self.w_prior, &mut w.prior),
+            (
+                "extremity_reach",
+                self.extremity_reach,
+                &mut w.extremity_reach,
+            ),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {
@@ -251,6 +261,13 @@ impl JobOptions {
             return Err(format!(
                 "w_skin {}: expected at most {max}",
                 o.track.weights.skin
+            ));
+        }
+        let max = crate::track::objective::MAX_EXTREMITY_REACH;
+        if o.track.weights.extremity_reach > max {
+            return Err(format!(
+                "extremity_reach {}: expected at most {max}",
+                o.track.weights.extremity_reach
             ));
         }
         if let Some(t) = self.track_rewards {

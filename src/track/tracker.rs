@@ -1654,7 +1654,7 @@ impl Tracker {
                     let body = Body::new(&s);
                     let w = Weights {
                         smooth: false,
-                        ..self.opts.weights
+                        ..self.opts.weights.unbounded_ends()
                     };
                     Evaluator::new(&body, cam, target, w, None).cost(&p)
                 },
@@ -1715,7 +1715,7 @@ impl Tracker {
         let cam = &self.camera;
         let weights = Weights {
             smooth: true,
-            ..self.opts.weights
+            ..self.opts.weights.unbounded_ends()
         };
         // The vertical extent (head top over the soles) and the hips' height over
         // the soles of a body in a pose.
@@ -2530,9 +2530,11 @@ impl<'a> Search<'a> {
     }
 
     /// A search for the initialisation, which counts whole pixels
-    /// ([`Weights::smooth`]).
+    /// ([`Weights::smooth`]) and weighs the extremity term unbounded
+    /// ([`Weights::unbounded_ends`]).
     fn initial(tracker: &'a Tracker, body: &'a Body) -> Search<'a> {
         let mut s = Search::new(tracker, body, f64::NEG_INFINITY);
+        s.weights = s.weights.unbounded_ends();
         s.weights.smooth = false;
         s
     }
