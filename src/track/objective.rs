@@ -9,7 +9,8 @@
 //! - e (Eq. 4) = −w_e Σ M·T, the edge reward;
 //! - a (Eq. 6) = −w_a Σ M·R, the arm and leg region reward;
 //! - l (Eq. 5) = w_l Σ over the model's hands, feet and head of the pixel distance to
-//!   a detected candidate of its kind.
+//!   a detected candidate of its kind (optionally bounded while tracking,
+//!   [`Weights::extremity_reach`]).
 //!
 //! c + e + a folds into one per-pixel map read only where the model is: since
 //! S ⊕ M = S + M − 2·S·M, c = Σ_S d + Σ_M d·(1 − 2S), so
@@ -776,7 +777,9 @@ impl<'a> Evaluator<'a> {
     /// detected candidate of the same kind (Eq. 5). Left and right cannot be told
     /// apart, so the two hands (feet) take the pairing with the candidates that
     /// makes the sum smallest; with a single candidate only the nearer end is pulled
-    /// to it (the other is probably hidden), and with none the term is off.
+    /// to it (the other is probably hidden), and with none the term is off. Each
+    /// distance counts at most [`Weights::extremity_reach`] times the person's
+    /// height, when that is above 0.
     fn end_distances(&self) -> f64 {
         let reach = match self.weights.extremity_reach {
             r if r > 0.0 => r * self.target.body_height,
