@@ -202,6 +202,8 @@ impl WeightArgs {
         if self.w_skin > max {
             anyhow::bail!("--w-skin {}: expected at most {max}", self.w_skin);
         }
+        monocap::track::objective::check_extremity_reach(self.extremity_reach, "--extremity-reach")
+            .map_err(anyhow::Error::msg)?;
         w.edge = self.w_edge;
         w.extremity = self.w_extremity;
         w.region = self.w_region;
@@ -211,13 +213,6 @@ impl WeightArgs {
         w.shading = self.w_shading;
         w.skin = self.w_skin;
         w.smooth = !self.whole_pixels;
-        let max = monocap::track::objective::MAX_EXTREMITY_REACH;
-        if self.extremity_reach > max {
-            anyhow::bail!(
-                "--extremity-reach {}: expected at most {max}",
-                self.extremity_reach
-            );
-        }
         w.prior = self.w_prior;
         w.extremity_reach = self.extremity_reach;
         Ok(())

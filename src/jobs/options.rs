@@ -263,13 +263,10 @@ impl JobOptions {
                 o.track.weights.skin
             ));
         }
-        let max = crate::track::objective::MAX_EXTREMITY_REACH;
-        if o.track.weights.extremity_reach > max {
-            return Err(format!(
-                "extremity_reach {}: expected at most {max}",
-                o.track.weights.extremity_reach
-            ));
-        }
+        crate::track::objective::check_extremity_reach(
+            o.track.weights.extremity_reach,
+            "extremity_reach",
+        )?;
         if let Some(t) = self.track_rewards {
             o.track.weights.track_rewards = t;
         }

@@ -51,6 +51,18 @@ pub const EXTREMITY_REACH: f64 = 0.0;
 /// The largest [`Weights::extremity_reach`].
 pub const MAX_EXTREMITY_REACH: f64 = 1.0;
 
+/// Checks that a [`Weights::extremity_reach`], named `name` in the message, is at
+/// most [`MAX_EXTREMITY_REACH`] (that it is a number ≥ 0 is checked with the other
+/// weights).
+pub fn check_extremity_reach(reach: f64, name: &str) -> Result<(), String> {
+    if reach > MAX_EXTREMITY_REACH {
+        return Err(format!(
+            "{name} {reach}: expected at most {MAX_EXTREMITY_REACH}"
+        ));
+    }
+    Ok(())
+}
+
 /// Weights of the objective's terms (the paper's defaults).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Weights {
