@@ -260,6 +260,10 @@ struct RefitArgs {
     /// accurate.
     #[arg(long)]
     no_exemplar_starts: bool,
+    /// Probe the initial candidates as the frames are tracked, with every restart
+    /// and jump (by default once per frame and without jumps). Slower.
+    #[arg(long)]
+    full_probes: bool,
     /// Where the second pass starts: the best-scoring initial frame among each
     /// block's last this many frames with a person (1 to 150; 1: the last one).
     #[arg(long, default_value_t = 1)]
@@ -311,6 +315,7 @@ impl RefitArgs {
         track.parted_share_max = self.parted_share_max;
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
+        track.full_probes = self.full_probes;
         monocap::track::tracker::check_second_pass_window(
             self.second_pass_window,
             "--second-pass-window",

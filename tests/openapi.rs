@@ -525,5 +525,11 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"extremity_reach": -0.1}), false);
     check(serde_json::json!({"track_rewards": true}), true);
     check(serde_json::json!({"track_rewards": 1}), false);
+    // The full probes: off by default, on from a query.
+    check(serde_json::json!({"full_probes": true}), true);
+    check(serde_json::json!({"full_probes": "yes"}), false);
+    let full = JobOptions::from_query(&[("full_probes".into(), "true".into())]).unwrap();
+    assert!(full.to_track().unwrap().track.full_probes);
+    assert!(!JobOptions::default().to_track().unwrap().track.full_probes);
     check(serde_json::json!({"no_such_option": 1}), false);
 }

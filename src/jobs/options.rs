@@ -53,7 +53,7 @@ pub struct JobOptions {
     /// pass starts where each run meets the next, each about one pass's work more.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub middle_starts: Option<usize>,
-    /// Middle passes in all on a block whose passes part, 0 to 4 (default 0,
+    /// Middle passes in all on a block whose passes part, 0 to 4 (default 3; 0:
     /// never; see `TrackOptions::parted_middle_starts`): where a middle pass's
     /// answers lie apart from the backwards pass's, but not far apart over most of
     /// the block, the block is given this many, started as `middle_starts` would
@@ -70,6 +70,10 @@ pub struct JobOptions {
     /// `TrackOptions::exemplar_starts`): more accurate; false starts faster.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exemplar_starts: Option<bool>,
+    /// The initial candidates probed with every restart and jump, as the frames are
+    /// tracked (default false; see `TrackOptions::full_probes`): slower.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub full_probes: Option<bool>,
     /// How each frame chooses among the passes' answers, 0 to 1000 (default 0.03;
     /// see `TrackOptions::switch_penalty`): the price of moving from one pass's
     /// track to another's; 0 takes each frame's cheapest answer.
@@ -224,6 +228,9 @@ impl JobOptions {
         }
         if let Some(t) = self.exemplar_starts {
             o.track.exemplar_starts = t;
+        }
+        if let Some(t) = self.full_probes {
+            o.track.full_probes = t;
         }
         if let Some(t) = self.two_way {
             o.track.two_way = t;

@@ -80,6 +80,10 @@ const MAX_RESIZE: f64 = 1.25;
 /// Frames tracked from each initial candidate to choose between them.
 const HYPOTHESIS_FRAMES: usize = 15;
 
+/// Restarts of each frame's search in the probes of the initial candidates, which
+/// also leave out the jumps, unless [`TrackOptions::full_probes`].
+const PROBE_RESTARTS: usize = 1;
+
 /// Frames tracked from each initialisation's start to choose between the
 /// initialisations ([`TrackOptions::round_start`]).
 const START_PROBE_FRAMES: usize = 40;
@@ -248,6 +252,10 @@ pub fn check_middle_starts(n: usize, name: &str) -> Result<(), String> {
     }
     Ok(())
 }
+
+/// The default of [`TrackOptions::parted_middle_starts`]: a block whose passes part
+/// is given the quarter and three-quarter passes beside the middle one.
+pub const PARTED_MIDDLE_STARTS: usize = 3;
 
 /// The default of [`TrackOptions::parted_share`]: a block's later passes part when
 /// a middle pass's answers lie more than a tenth of the body's image height from
@@ -490,12 +498,11 @@ pub struct TrackOptions {
     /// [`PARTED_SHARE_MAX`]), the block is given this many middle passes in all, as
     /// [`TrackOptions::middle_starts`] would start them (the passes already run are
     /// not run again), so it comes out as with that many from the outset. 0, or no
-    /// more than `middle_starts`: never. With 3, over three runs of the accuracy
-    /// benchmark (seed 2 with a lead-in and without, seed 3 without), PCK@0.1 0.947
-    /// and PA-MPJPE 67.2 mm against 0.940 and 69.7 by default and 0.948 and 66.9
-    /// with three middle passes everywhere, at an estimated 1.23 times the
-    /// default's CPU time: not the default (README, "Middle passes where the
-    /// passes part a little").
+    /// more than `middle_starts`: never. 3 by default since the probes became
+    /// cheaper ([`TrackOptions::full_probes`]), which pays for them: over the six
+    /// runs of the accuracy benchmark the two together scored PCK@0.1 0.953 and
+    /// PA-MPJPE 65.6 mm against 0.949 and 66.7 before, at 1.02 times the CPU time
+    /// (README, "Cheaper probes, more middle passes").
     pub parted_middle_starts: usize,
     /// When a block's passes part ([`TrackOptions::parted_middle_starts`]): a
     /// middle pass's answers put more than this share of the joints more than a
@@ -564,6 +571,15 @@ pub struct TrackOptions {
     /// from the captures as starts"). No effect without a pose prior, or with one
     /// whose file holds no exemplars.
     pub exemplar_starts: bool,
+    /// Probe the initial candidates as the frames are tracked (false by default):
+    /// each candidate's [`HYPOTHESIS_FRAMES`] frames searched with every restart
+    /// and every jump. By default the probes search each frame once
+    /// ([`PROBE_RESTARTS`]) and try no jumps: they only rank the candidates, and
+    /// at full cost they took a fifth of the tracker's time. Cheaper probes pay for
+    /// the default's more middle passes where the passes part
+    /// ([`TrackOptions::parted_middle_starts`]; README, "Cheaper probes, more
+    /// middle passes").
+    pub full_probes: bool,
     /// Evaluations of the initialisation's joint fit (8,000 by default; 0 for
     /// none): after the simplex has fitted the shape and the pose in turn, CMA-ES
     /// over the 12 shape values and the 30 pose values at once, under the
@@ -620,7 +636,7 @@ impl Default for TrackOptions {
             second_pass_window: 1,
             middle_pass: true,
             middle_starts: 1,
-            parted_middle_starts: 0,
+            parted_middle_starts: PARTED_MIDDLE_STARTS,
             parted_share: PARTED_SHARE,
             parted_share_max: PARTED_SHARE_MAX,
             switch_penalty: SWITCH_PENALTY,
@@ -635,6 +651,7 @@ impl Default for TrackOptions {
             start_shape: TYPICAL_SHAPE,
             round_start: true,
             exemplar_starts: true,
+            full_probes: false,
             init_joint_evals: INIT_JOINT_EVALS,
             pose_prior: Some(PosePrior::builtin()),
             stop: None,
@@ -1394,6 +1411,10 @@ impl Tracker {
                 let mut probe = Search::new(self, body, sole_height(body, &body.posed(c)));
                 probe.weigh_outlines = false;
                 probe.joint_velocity = true;
+                if !self.opts.full_probes {
+                    probe.restarts = PROBE_RESTARTS;
+                    probe.jumps = false;
+                }
                 let mut total = 0.0;
                 for run in [&after, &before] {
                     let mut history = History::new(*c);
@@ -2511,6 +2532,12 @@ struct Search<'a> {
     joint_velocity: bool,
     /// The objective's weights: the tracker's, whole pixels in the initialisation.
     weights: Weights,
+    /// Restarts of each frame's search ([`TrackOptions::restarts`]; one for the
+    /// probes unless [`TrackOptions::full_probes`]).
+    restarts: usize,
+    /// Whether each frame tries the jumps ([`Search::try_jumps`]; not the probes
+    /// unless [`TrackOptions::full_probes`]).
+    jumps: bool,
 }
 
 impl<'a> Search<'a> {
@@ -2526,6 +2553,8 @@ impl<'a> Search<'a> {
             weigh_outlines: true,
             joint_velocity: tracker.opts.joint_velocity,
             weights: tracker.opts.weights,
+            restarts: tracker.opts.restarts,
+            jumps: true,
         }
     }
 
@@ -2700,11 +2729,11 @@ impl<'a> Search<'a> {
             &mut best_f,
             &lo,
             &hi,
-            opts.restarts,
+            self.restarts,
             opts.evals_per_param,
         );
         // A keyframe's frames keep their start (and the keyframe its parameters).
-        if !keyframe {
+        if !keyframe && self.jumps {
             self.try_jumps(&mut ev, target, &mut best, &mut best_f);
         }
         let mut iou = ev.iou(&best);
