@@ -129,6 +129,37 @@ fn a_short_synthetic_clip_tracks_end_to_end() {
     assert!(pck >= 0.8, "PCK {pck:.3}");
 }
 
+/// The probes that rank each pass's initial candidates search each frame once and
+/// try no jumps unless `full_probes` is set: the same clip, tracked with every pass,
+/// costs fewer evaluations by default.
+#[test]
+fn the_default_probes_cost_less_than_the_full_ones() {
+    let (masks, _, opts) = run_masks();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let track = |full_probes| {
+        let o = TrackOptions {
+            full_probes,
+            ..TrackOptions::default()
+        };
+        Tracker::new(cam.clone(), o)
+            .track(inputs(&masks), Some(masks.len()), |_, _| {
+                ControlFlow::Continue(())
+            })
+            .unwrap()
+    };
+    let (cheap, full) = (track(false), track(true));
+    println!(
+        "{} evaluations with the default probes, {} with the full ones",
+        cheap.timing.evals, full.timing.evals
+    );
+    assert!(
+        cheap.timing.evals < full.timing.evals,
+        "{} evaluations with the default probes against {} with the full ones",
+        cheap.timing.evals,
+        full.timing.evals
+    );
+}
+
 /// The later passes only ever replace a frame by a cheaper answer: the first pass
 /// is the one-way track, frame for frame, and the middle pass changes the two-way
 /// track only where it is cheaper still.
