@@ -49,6 +49,15 @@ fn inputs(masks: &[Mask]) -> impl Iterator<Item = anyhow::Result<FrameInput>> + 
     })
 }
 
+/// `masks` tracked with `opts`.
+fn track_masks(cam: &Camera, masks: &[Mask], opts: TrackOptions) -> Track {
+    Tracker::new(cam.clone(), opts)
+        .track(inputs(masks), Some(masks.len()), |_, _| {
+            ControlFlow::Continue(())
+        })
+        .unwrap()
+}
+
 /// Runs `monocap synth` on the fixture as a silhouette clip at `clip`, with `extra`
 /// arguments.
 fn synth_masks(clip: &Path, extra: &[&str]) {
@@ -141,11 +150,7 @@ fn the_default_probes_cost_less_than_the_full_ones() {
             full_probes,
             ..TrackOptions::default()
         };
-        Tracker::new(cam.clone(), o)
-            .track(inputs(&masks), Some(masks.len()), |_, _| {
-                ControlFlow::Continue(())
-            })
-            .unwrap()
+        track_masks(&cam, &masks, o)
     };
     let (cheap, full) = (track(false), track(true));
     println!(
@@ -182,11 +187,7 @@ fn the_later_passes_keep_the_first_or_a_cheaper_answer() {
             round_start: false,
             ..TrackOptions::default()
         };
-        Tracker::new(cam.clone(), o)
-            .track(inputs(&masks), Some(masks.len()), |_, _| {
-                ControlFlow::Continue(())
-            })
-            .unwrap()
+        track_masks(&cam, &masks, o)
     };
     let track = |two_way, middle_starts, switch_penalty| {
         track_parted(two_way, middle_starts, switch_penalty, (0, DEFAULT_BAND))
@@ -314,11 +315,7 @@ fn the_other_candidate_starts_turned_round() {
             two_way: false,
             ..TrackOptions::default()
         };
-        let track = Tracker::new(cam.clone(), o)
-            .track(inputs(&masks), Some(masks.len()), |_, _| {
-                ControlFlow::Continue(())
-            })
-            .unwrap();
+        let track = track_masks(&cam, &masks, o);
         track.frames[track.init_frame].pose[monocap::body::params::ix::ROOT_RY]
     };
     let (chosen, other) = (heading(false), heading(true));

@@ -502,7 +502,7 @@ pub struct TrackOptions {
     /// cheaper ([`TrackOptions::full_probes`]), which pays for them: over the six
     /// runs of the accuracy benchmark the two together scored PCK@0.1 0.953 and
     /// PA-MPJPE 65.6 mm against 0.949 and 66.7 before, at 1.02 times the CPU time
-    /// (README, "Cheaper probes, more middle passes").
+    /// on the run timed (README, "Cheaper probes, more middle passes").
     pub parted_middle_starts: usize,
     /// When a block's passes part ([`TrackOptions::parted_middle_starts`]): a
     /// middle pass's answers put more than this share of the joints more than a
