@@ -179,6 +179,12 @@ struct WeightArgs {
     /// paper's term)
     #[arg(long, default_value_t = monocap::track::objective::EXTREMITY_REACH)]
     extremity_reach: f64,
+    /// Let the model's hands and feet share the outline's hand and foot
+    /// candidates (each end pulled to a distinct one) instead of the hands taking
+    /// those labelled hands and the feet those labelled feet by their height: a
+    /// foot raised in a kick is labelled a hand
+    #[arg(long)]
+    shared_ends: bool,
 }
 
 impl WeightArgs {
@@ -215,6 +221,7 @@ impl WeightArgs {
         w.smooth = !self.whole_pixels;
         w.prior = self.w_prior;
         w.extremity_reach = self.extremity_reach;
+        w.shared_ends = self.shared_ends;
         Ok(())
     }
 }

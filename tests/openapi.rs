@@ -525,6 +525,19 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"extremity_reach": -0.1}), false);
     check(serde_json::json!({"track_rewards": true}), true);
     check(serde_json::json!({"track_rewards": 1}), false);
+    // The shared ends: off by default, on from a query.
+    check(serde_json::json!({"shared_ends": true}), true);
+    check(serde_json::json!({"shared_ends": "no"}), false);
+    let shared = JobOptions::from_query(&[("shared_ends".into(), "true".into())]).unwrap();
+    assert!(shared.to_track().unwrap().track.weights.shared_ends);
+    assert!(
+        !JobOptions::default()
+            .to_track()
+            .unwrap()
+            .track
+            .weights
+            .shared_ends
+    );
     // The full probes: off by default, on from a query.
     check(serde_json::json!({"full_probes": true}), true);
     check(serde_json::json!({"full_probes": "yes"}), false);

@@ -112,6 +112,10 @@ pub struct JobOptions {
     /// pulled to one (default 0, no bound; see `Weights::extremity_reach`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub extremity_reach: Option<f64>,
+    /// Let the model's hands and feet share the outline's hand and foot candidates
+    /// (default false: each takes those of its kind; see `Weights::shared_ends`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub shared_ends: Option<bool>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -276,6 +280,9 @@ impl JobOptions {
         )?;
         if let Some(t) = self.track_rewards {
             o.track.weights.track_rewards = t;
+        }
+        if let Some(k) = self.shared_ends {
+            o.track.weights.shared_ends = k;
         }
         o.track.init_frame = self.init_frame;
         if let Some(text) = &self.frames {
