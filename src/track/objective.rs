@@ -145,7 +145,7 @@ pub struct Weights {
     /// outline's height labels them (a candidate in the lowest quarter of the
     /// person is a foot, any other a hand). A foot raised above the knee in a kick
     /// is labelled a hand: a hand must then reach for it, and the kick's true poses
-    /// cost 1,550–2,970 on such frames where their others cost under 500. Off by
+    /// cost 1,551–2,968 on such frames, under 400 on the frames around them. Off by
     /// default: over the accuracy benchmark's six runs it changed nothing beyond
     /// chance (PCK@0.1 0.953 → 0.954, PA-MPJPE 65.6 mm both), and the DAVIS
     /// people's mean IoU fell 0.811 → 0.806 (README, "The hands and feet sharing
@@ -1217,9 +1217,6 @@ fn dist(a: &[f64; 2], b: &[f64; 2]) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2)).sqrt()
 }
 
-/// Smallest total distance pairing two model ends with distinct candidates (one end
-/// when there is one candidate; 0 with none), each distance at most `reach`. An end
-/// off-screen counts nothing.
 /// At most this many candidates are paired with the four ends in
 /// [`shared_distance`] (the rest are ignored).
 const MAX_SHARED_CANDIDATES: usize = 8;
@@ -1271,6 +1268,9 @@ fn shared_distance(ends: &[Option<[f64; 2]>; 4], cands: &[[f64; 2]], reach: f64)
     p.best
 }
 
+/// Smallest total distance pairing two model ends with distinct candidates (one end
+/// when there is one candidate; 0 with none), each distance at most `reach`. An end
+/// off-screen counts nothing.
 fn pair_distance(ends: &[Option<[f64; 2]>; 2], cands: &[[f64; 2]], reach: f64) -> f64 {
     let d = |e: &Option<[f64; 2]>, c: &[f64; 2]| e.map_or(0.0, |e| dist(&e, c).min(reach));
     match cands.len() {
