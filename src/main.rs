@@ -185,6 +185,13 @@ struct WeightArgs {
     /// foot raised in a kick is labelled a hand
     #[arg(long)]
     shared_ends: bool,
+    /// While tracking, how far (a fraction of the person's height) beyond its own
+    /// radius a model elbow or knee may lie from a hand or foot candidate and
+    /// claim it, leaving the hands and feet the rest: a fist hidden in front of
+    /// the face is not pulled to the elbow that sticks out (0 to 1; 0: no claims,
+    /// the paper's term)
+    #[arg(long, default_value_t = monocap::track::objective::CLAIM_REACH)]
+    claim_reach: f64,
 }
 
 impl WeightArgs {
@@ -199,6 +206,7 @@ impl WeightArgs {
             ("--w-skin", self.w_skin),
             ("--w-prior", self.w_prior),
             ("--extremity-reach", self.extremity_reach),
+            ("--claim-reach", self.claim_reach),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 anyhow::bail!("{flag} {v}: expected a number ≥ 0");
@@ -208,8 +216,9 @@ impl WeightArgs {
         if self.w_skin > max {
             anyhow::bail!("--w-skin {}: expected at most {max}", self.w_skin);
         }
-        monocap::track::objective::check_extremity_reach(self.extremity_reach, "--extremity-reach")
-            .map_err(anyhow::Error::msg)?;
+        use monocap::track::objective::check_reach;
+        check_reach(self.extremity_reach, "--extremity-reach").map_err(anyhow::Error::msg)?;
+        check_reach(self.claim_reach, "--claim-reach").map_err(anyhow::Error::msg)?;
         w.edge = self.w_edge;
         w.extremity = self.w_extremity;
         w.region = self.w_region;
@@ -222,6 +231,7 @@ impl WeightArgs {
         w.prior = self.w_prior;
         w.extremity_reach = self.extremity_reach;
         w.shared_ends = self.shared_ends;
+        w.claim_reach = self.claim_reach;
         Ok(())
     }
 }

@@ -523,6 +523,22 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"extremity_reach": 1.0}), true);
     check(serde_json::json!({"extremity_reach": 1.5}), false);
     check(serde_json::json!({"extremity_reach": -0.1}), false);
+    // The elbows' and knees' claims: on by default, off from a query.
+    check(serde_json::json!({"claim_reach": 0.0}), true);
+    check(serde_json::json!({"claim_reach": 1.0}), true);
+    check(serde_json::json!({"claim_reach": 1.5}), false);
+    check(serde_json::json!({"claim_reach": -0.1}), false);
+    let off = JobOptions::from_query(&[("claim_reach".into(), "0".into())]).unwrap();
+    assert_eq!(off.to_track().unwrap().track.weights.claim_reach, 0.0);
+    assert_eq!(
+        JobOptions::default()
+            .to_track()
+            .unwrap()
+            .track
+            .weights
+            .claim_reach,
+        monocap::track::objective::CLAIM_REACH
+    );
     check(serde_json::json!({"track_rewards": true}), true);
     check(serde_json::json!({"track_rewards": 1}), false);
     // The shared ends: off by default, on from a query.

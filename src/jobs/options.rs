@@ -116,6 +116,11 @@ pub struct JobOptions {
     /// (default false: each takes those of its kind; see `Weights::shared_ends`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub shared_ends: Option<bool>,
+    /// While tracking, how far (a fraction of the person's height) beyond its own
+    /// radius a model elbow or knee may lie from a hand or foot candidate and
+    /// claim it (default 0.02; 0 for no claims; see `Weights::claim_reach`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub claim_reach: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the
     /// initialisation (the paper's objective; default false, see
     /// `Weights::track_rewards`).
@@ -259,6 +264,7 @@ impl JobOptions {
                 self.extremity_reach,
                 &mut w.extremity_reach,
             ),
+            ("claim_reach", self.claim_reach, &mut w.claim_reach),
         ] {
             if let Some(v) = v {
                 if !(v.is_finite() && v >= 0.0) {
@@ -274,10 +280,9 @@ impl JobOptions {
                 o.track.weights.skin
             ));
         }
-        crate::track::objective::check_extremity_reach(
-            o.track.weights.extremity_reach,
-            "extremity_reach",
-        )?;
+        use crate::track::objective::check_reach;
+        check_reach(o.track.weights.extremity_reach, "extremity_reach")?;
+        check_reach(o.track.weights.claim_reach, "claim_reach")?;
         if let Some(t) = self.track_rewards {
             o.track.weights.track_rewards = t;
         }

@@ -2559,8 +2559,8 @@ impl<'a> Search<'a> {
     }
 
     /// A search for the initialisation, which counts whole pixels
-    /// ([`Weights::smooth`]) and weighs the extremity term unbounded
-    /// ([`Weights::unbounded_ends`]).
+    /// ([`Weights::smooth`]) and weighs the extremity term unbounded and without
+    /// claims ([`Weights::unbounded_ends`]).
     fn initial(tracker: &'a Tracker, body: &'a Body) -> Search<'a> {
         let mut s = Search::new(tracker, body, f64::NEG_INFINITY);
         s.weights = s.weights.unbounded_ends();
