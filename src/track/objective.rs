@@ -925,8 +925,8 @@ impl<'a> Evaluator<'a> {
     /// with the hand and foot candidates together ([`shared_distance`]). Each
     /// distance counts at most [`Weights::extremity_reach`] times the person's
     /// height, when that is above 0. Otherwise, with [`Weights::claim_reach`] above
-    /// 0, the elbows and knees may first claim candidates ([`Evaluator::
-    /// claimed_distance`]).
+    /// 0, the elbows and knees may first claim candidates
+    /// ([`Evaluator::claimed_distance`]).
     fn end_distances(&self) -> f64 {
         let reach = match self.weights.extremity_reach {
             r if r > 0.0 => r * self.target.body_height,
@@ -1636,8 +1636,8 @@ mod tests {
         let elbow = posed.joint(Joint::RightForeArm);
         let e = cam.project(&elbow).unwrap();
         let r_px = joint_radii(&body).0 * cam.fx / -cam.to_camera(&elbow).z;
-        // On the elbow's rim, pushed out to the right (the body's right is the
-        // picture's left here), a little beyond it.
+        // Level with the elbow's centre, out to the side: its radius and a
+        // little more away.
         let beyond = 0.01 * target.body_height;
         let rim = [e[0] - r_px - beyond, e[1]];
         let cost = |target: &Target, claim_reach: f64| {
