@@ -830,7 +830,8 @@ impl<'a> Evaluator<'a> {
 
     /// The hands' and feet's pairing ([`pair_distance`]) after the elbows and
     /// knees claim what candidates they may ([`Weights::claim_reach`]): the least
-    /// total over every way of claiming, none included.
+    /// total over every way of claiming, none included. At most
+    /// [`MAX_CLAIM_CANDIDATES`] / 2 candidates of each kind.
     fn claimed_distance(
         &self,
         hands: &[Option<[f64; 2]>; 2],
@@ -839,9 +840,6 @@ impl<'a> Evaluator<'a> {
     ) -> f64 {
         let t = self.target;
         let (nh, nf) = (t.hands.len(), t.feet.len());
-        if nh.max(nf) > MAX_CLAIM_CANDIDATES / 2 {
-            return pair_distance(hands, &t.hands, reach) + pair_distance(feet, &t.feet, reach);
-        }
         let cands = |i: usize| if i < nh { t.hands[i] } else { t.feet[i - nh] };
         let n = nh + nf;
         let slack = self.weights.claim_reach * t.body_height;
@@ -854,7 +852,6 @@ impl<'a> Evaluator<'a> {
             (Joint::LeftLeg, self.radius.1),
             (Joint::RightLeg, self.radius.1),
         ];
-        let mut any = false;
         for (k, (j, r)) in middle.iter().enumerate() {
             let c = self.cam.to_camera(&self.posed.joint(*j));
             let Some(q) = self.cam.project_camera(&c) else {
@@ -866,7 +863,6 @@ impl<'a> Evaluator<'a> {
                 if over <= slack {
                     claims[k][counts[k]] = (i, over.max(0.0));
                     counts[k] += 1;
-                    any = true;
                 }
             }
         }
@@ -885,9 +881,6 @@ impl<'a> Evaluator<'a> {
             }
             pair_distance(hands, &h[..a], reach) + pair_distance(feet, &f[..b], reach)
         };
-        if !any {
-            return rest(0);
-        }
         fn each(
             k: usize,
             used: u32,
@@ -941,7 +934,9 @@ impl<'a> Evaluator<'a> {
         let mut sum = if self.weights.shared_ends {
             let ends = [hands[0], hands[1], feet[0], feet[1]];
             shared_distance(&ends, &self.target.limb_ends, reach)
-        } else if self.weights.claim_reach > 0.0 {
+        } else if self.weights.claim_reach > 0.0
+            && self.target.hands.len().max(self.target.feet.len()) <= MAX_CLAIM_CANDIDATES / 2
+        {
             self.claimed_distance(&hands, &feet, reach)
         } else {
             pair_distance(&hands, &self.target.hands, reach)
