@@ -187,9 +187,10 @@ struct WeightArgs {
     shared_ends: bool,
     /// While tracking, how far (a fraction of the person's height) beyond its own
     /// radius a model elbow or knee may lie from a hand or foot candidate and
-    /// claim it, leaving the hands and feet the rest: a fist hidden in front of
-    /// the face is not pulled to the elbow that sticks out (0 to 1; 0: no claims,
-    /// the paper's term)
+    /// claim it while its own hand or foot is hidden inside the silhouette,
+    /// leaving the hands and feet the rest: a fist hidden in front of the face is
+    /// not pulled to the elbow that sticks out (0 to 1; 0: no claims, the paper's
+    /// term)
     #[arg(long, default_value_t = monocap::track::objective::CLAIM_REACH)]
     claim_reach: f64,
 }

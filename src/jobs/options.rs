@@ -118,7 +118,8 @@ pub struct JobOptions {
     pub shared_ends: Option<bool>,
     /// While tracking, how far (a fraction of the person's height) beyond its own
     /// radius a model elbow or knee may lie from a hand or foot candidate and
-    /// claim it (default 0.02; 0 for no claims; see `Weights::claim_reach`).
+    /// claim it while its hand or foot is hidden (default 0.02; 0 for no claims;
+    /// see `Weights::claim_reach`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub claim_reach: Option<f64>,
     /// Pay the edge and region rewards while tracking too, not only in the

@@ -50,9 +50,9 @@ pub const SKIN_WEIGHT: f64 = 2.0;
 pub const EXTREMITY_REACH: f64 = 0.0;
 
 /// Default of [`Weights::claim_reach`]. Over the accuracy benchmark's six runs
-/// against no claims: PCK@0.1 0.953 → 0.960, PA-MPJPE 65.6 → 62.4 mm, lost
-/// frames 1 → 4; the DAVIS people's mean IoU 0.811 → 0.807 (README, "Elbows and
-/// knees claiming candidates").
+/// against no claims: PCK@0.1 0.953 → 0.958, PA-MPJPE 65.6 → 63.2 mm, lost
+/// frames 1 → 0; the DAVIS people's mean IoU 0.811 → 0.812 (README, "Elbows and
+/// knees claiming candidates" and "Claims for hidden hands and feet only").
 pub const CLAIM_REACH: f64 = 0.02;
 
 /// The largest [`Weights::extremity_reach`] and [`Weights::claim_reach`].
@@ -157,8 +157,9 @@ pub struct Weights {
     pub shared_ends: bool,
     /// How far (a fraction of the person's height) beyond its own radius an
     /// elbow or a knee of the model may lie from a hand or foot candidate and
-    /// claim it (Eq. 5): a claimed candidate is explained by that joint, pays the
-    /// distance beyond the radius, and is taken from the hands and feet, which
+    /// claim it (Eq. 5), while its own hand or foot projects inside the
+    /// silhouette, hidden: a claimed candidate is explained by that joint, pays
+    /// the distance beyond the radius, and is taken from the hands and feet, which
     /// pair with the rest ([`Evaluator::claimed_distance`]). An outline's sharp
     /// point is not always a hand: in a guard the fist is hidden in front of the
     /// face and the elbow sticks out. 0: no claims (the paper's term); while
@@ -829,8 +830,9 @@ impl<'a> Evaluator<'a> {
     }
 
     /// The hands' and feet's pairing ([`pair_distance`]) after the elbows and
-    /// knees claim what candidates they may ([`Weights::claim_reach`]): the least
-    /// total over every way of claiming, none included. At most
+    /// knees claim what candidates they may ([`Weights::claim_reach`]; each only
+    /// while its hand or foot is hidden): the least total over every way of
+    /// claiming, none included. At most
     /// [`MAX_CLAIM_CANDIDATES`] / 2 candidates of each kind.
     fn claimed_distance(
         &self,
@@ -852,7 +854,23 @@ impl<'a> Evaluator<'a> {
             (Joint::LeftLeg, self.radius.1),
             (Joint::RightLeg, self.radius.1),
         ];
+        // A middle joint claims only while its own hand or foot is hidden: it
+        // projects inside the silhouette, where no candidate can mark it.
+        let ends = [hands[0], hands[1], feet[0], feet[1]];
+        let hidden = |e: &Option<[f64; 2]>| {
+            e.is_some_and(|[x, y]| {
+                let m = &t.silhouette;
+                x >= 0.0
+                    && y >= 0.0
+                    && x < m.width() as f64
+                    && y < m.height() as f64
+                    && m.get(x as u32, y as u32)
+            })
+        };
         for (k, (j, r)) in middle.iter().enumerate() {
+            if !hidden(&ends[k]) {
+                continue;
+            }
             let c = self.cam.to_camera(&self.posed.joint(*j));
             let Some(q) = self.cam.project_camera(&c) else {
                 continue;
@@ -1621,6 +1639,7 @@ mod tests {
     fn an_elbow_claims_the_candidate_it_sticks_out_to() {
         // A guard: the right fist is hidden in front of the body, and the right
         // elbow sticks out to the outline, where a hand candidate is found.
+        // (The scene's hand is at its side; the test marks its tip hidden or not.)
         let (body, cam, pose) = scene();
         let (_, mut target) = target_of(&body, &cam, &pose);
         target.heads.clear();
@@ -1657,6 +1676,12 @@ mod tests {
         );
         // Claimed, the elbow pays what it lies beyond its radius, and the hands
         // pair with what is left: the left hand's candidate, on it.
+        // The right hand shows on the outline: its elbow makes no claim.
+        let (x, y) = (rh[0] as u32, rh[1] as u32);
+        target.silhouette.set(x, y, false);
+        assert!((cost(&target, 0.02) - none - unclaimed).abs() < 1e-6 * gap);
+        // Hidden inside the silhouette, its elbow claims.
+        target.silhouette.set(x, y, true);
         let claimed = cost(&target, 0.02) - none;
         assert!((claimed - 20.0 * beyond).abs() < 1e-6 * gap, "{claimed}");
         // Beyond the reach, no claim.
