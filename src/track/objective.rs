@@ -832,8 +832,8 @@ impl<'a> Evaluator<'a> {
     /// The hands' and feet's pairing ([`pair_distance`]) after the elbows and
     /// knees claim what candidates they may ([`Weights::claim_reach`]; each only
     /// while its hand or foot is hidden): the least total over every way of
-    /// claiming, none included. At most
-    /// [`MAX_CLAIM_CANDIDATES`] / 2 candidates of each kind.
+    /// claiming, none included. At most [`MAX_CLAIM_CANDIDATES`] / 2 candidates
+    /// of each kind.
     fn claimed_distance(
         &self,
         hands: &[Option<[f64; 2]>; 2],
@@ -1674,13 +1674,13 @@ mod tests {
             (unclaimed - 20.0 * gap).abs() < 1e-6 * gap,
             "{unclaimed} {gap}"
         );
-        // Claimed, the elbow pays what it lies beyond its radius, and the hands
-        // pair with what is left: the left hand's candidate, on it.
         // The right hand shows on the outline: its elbow makes no claim.
         let (x, y) = (rh[0] as u32, rh[1] as u32);
         target.silhouette.set(x, y, false);
         assert!((cost(&target, 0.02) - none - unclaimed).abs() < 1e-6 * gap);
-        // Hidden inside the silhouette, its elbow claims.
+        // Hidden inside the silhouette, it is claimed: the elbow pays what it lies
+        // beyond its radius, and the hands pair with what is left: the left hand's
+        // candidate, on it.
         target.silhouette.set(x, y, true);
         let claimed = cost(&target, 0.02) - none;
         assert!((claimed - 20.0 * beyond).abs() < 1e-6 * gap, "{claimed}");
