@@ -54,6 +54,7 @@ fn jump_name(j: Jump) -> String {
         Jump::SwapLegs => "legs_swapped".into(),
         Jump::SwapArms => "arms_swapped".into(),
         Jump::Crouch => "crouched".into(),
+        Jump::Mirror => "depth_mirrored".into(),
     }
 }
 

@@ -282,6 +282,11 @@ struct RefitArgs {
     /// and jump (by default once per frame and without jumps). Slower.
     #[arg(long)]
     full_probes: bool,
+    /// Also try the whole body mirrored in depth as a jump on every frame (off by
+    /// default: measured and not kept, README "The whole body mirrored in depth,
+    /// as a jump"). Slower.
+    #[arg(long)]
+    mirror_jumps: bool,
     /// Where the second pass starts: the best-scoring initial frame among each
     /// block's last this many frames with a person (1 to 150; 1: the last one).
     #[arg(long, default_value_t = 1)]
@@ -334,6 +339,7 @@ impl RefitArgs {
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
         track.full_probes = self.full_probes;
+        track.mirror_jumps = self.mirror_jumps;
         monocap::track::tracker::check_second_pass_window(
             self.second_pass_window,
             "--second-pass-window",

@@ -560,5 +560,11 @@ fn documented_option_limits_are_the_services() {
     let full = JobOptions::from_query(&[("full_probes".into(), "true".into())]).unwrap();
     assert!(full.to_track().unwrap().track.full_probes);
     assert!(!JobOptions::default().to_track().unwrap().track.full_probes);
+    // The mirror jumps: off by default, on from a query.
+    check(serde_json::json!({"mirror_jumps": true}), true);
+    check(serde_json::json!({"mirror_jumps": "yes"}), false);
+    let mirror = JobOptions::from_query(&[("mirror_jumps".into(), "true".into())]).unwrap();
+    assert!(mirror.to_track().unwrap().track.mirror_jumps);
+    assert!(!JobOptions::default().to_track().unwrap().track.mirror_jumps);
     check(serde_json::json!({"no_such_option": 1}), false);
 }

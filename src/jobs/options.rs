@@ -74,6 +74,10 @@ pub struct JobOptions {
     /// tracked (default false; see `TrackOptions::full_probes`): slower.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub full_probes: Option<bool>,
+    /// Every frame also tries the whole body mirrored in depth as a jump (default
+    /// false; see `TrackOptions::mirror_jumps`): slower.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mirror_jumps: Option<bool>,
     /// How each frame chooses among the passes' answers, 0 to 1000 (default 0.03;
     /// see `TrackOptions::switch_penalty`): the price of moving from one pass's
     /// track to another's; 0 takes each frame's cheapest answer.
@@ -241,6 +245,9 @@ impl JobOptions {
         }
         if let Some(t) = self.full_probes {
             o.track.full_probes = t;
+        }
+        if let Some(t) = self.mirror_jumps {
+            o.track.mirror_jumps = t;
         }
         if let Some(t) = self.two_way {
             o.track.two_way = t;

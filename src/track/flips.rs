@@ -289,7 +289,8 @@ const CROUCH_GROUPS: [Group; 4] = [Group::Global, Group::Torso, Group::LeftLeg, 
 const NOD_GROUPS: [Group; 3] = [Group::Torso, Group::LeftArm, Group::RightArm];
 
 /// A jump the tracker tries from each frame's result: a depth flip, the head's nod
-/// moved into the trunk, a swap of the legs or the arms, or a crouch.
+/// moved into the trunk, a swap of the legs or the arms, a crouch, or the whole
+/// body's depth mirror.
 #[derive(Clone, Copy)]
 pub enum Jump {
     Flip(&'static Flip),
@@ -303,6 +304,11 @@ pub enum Jump {
     /// The hips lowered by [`CROUCH_CM`], the legs bent so that the feet stay
     /// where they are ([`crouch`]).
     Crouch,
+    /// The whole body mirrored in depth ([`depth_mirror`]): seen from an oblique
+    /// view, a track can settle on the mirror image of the person, turned away
+    /// from the true heading with left and right exchanged, and no single group's
+    /// search reaches the true pose from it. Refined over every group.
+    Mirror,
 }
 
 /// The landmarks a [`crouch`] keeps in place: the ankles, toe bases and toe tips.
@@ -383,6 +389,7 @@ impl Jump {
             Jump::SwapLegs,
             Jump::SwapArms,
             Jump::Crouch,
+            Jump::Mirror,
         ])
     }
 
@@ -394,6 +401,7 @@ impl Jump {
             Jump::SwapLegs => LEG_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::SwapArms => ARM_GROUPS.iter().flat_map(|g| g.range()).collect(),
             Jump::Crouch => CROUCH_GROUPS.iter().flat_map(|g| g.range()).collect(),
+            Jump::Mirror => Group::ALL.iter().flat_map(|g| g.range()).collect(),
         }
     }
 
@@ -410,6 +418,7 @@ impl Jump {
                 ix::R_SHOULDER - ix::L_SHOULDER,
             ),
             Jump::Crouch => Some(crouch(body, pose, -CROUCH_CM)),
+            Jump::Mirror => Some(depth_mirror(pose)),
         }
     }
 }
