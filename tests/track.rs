@@ -828,9 +828,10 @@ fn a_bow_towards_the_camera_is_tracked_mostly_in_the_trunk() {
 /// leg stepping forwards, stands still for six frames; the model starts on the
 /// first as the person's mirror image in depth (turned the other way, left and
 /// right exchanged), which casts nearly the same silhouette: the state a track is
-/// left in when it settled on the wrong one of the two. The depth flips of single
-/// bones and the swaps do not reach the person from there; the whole body's mirror
-/// tried as a jump on every frame ([`TrackOptions::mirror_jumps`]) does.
+/// left in when it settled on the wrong one of the two. The other jumps (the depth
+/// flips of single bones, the nod, the crouch) do not reach the person from there;
+/// the whole body's mirror tried as a jump on every frame
+/// ([`TrackOptions::mirror_jumps`]) does.
 #[test]
 fn a_track_left_on_the_mirror_image_jumps_back_to_the_person() {
     use monocap::body::params::{ix, rest_pose, STANDARD_SHAPE};
