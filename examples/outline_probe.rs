@@ -3,8 +3,8 @@
 //! (colour clips as `monocap bench` renders them), each frame's true shape and pose
 //! is compared with the same pose after each jump the tracker tries (the depth
 //! flips, the nod moved into the trunk, the legs and the arms swapped left for
-//! right) and with the whole body's depth mirror
-//! ([`monocap::track::flips::depth_mirror`]), by
+//! right, the crouch, the whole body's depth mirror
+//! ([`monocap::track::flips::depth_mirror`])), by
 //! [`monocap::track::outlines::Outlines::disagreement`] on the frame's edges (the
 //! true silhouette, so that only the outlines are measured) and by
 //! [`monocap::track::shading::Shading::misfit`] on its brightness. Prints, per
@@ -25,7 +25,7 @@ use monocap::body::{Body, Camera};
 use monocap::clip::write::Frame;
 use monocap::motion::bvh::Bvh;
 use monocap::synth::{synthesize_with, Style, SynthOptions};
-use monocap::track::flips::{depth_mirror, Jump};
+use monocap::track::flips::Jump;
 use monocap::track::objective::{Target, Weights};
 use monocap::track::outlines::Outlines;
 use monocap::track::shading::Shading;
@@ -54,7 +54,7 @@ fn jump_name(j: Jump) -> String {
         Jump::SwapLegs => "legs_swapped".into(),
         Jump::SwapArms => "arms_swapped".into(),
         Jump::Crouch => "crouched".into(),
-        Jump::Mirror => "depth_mirrored".into(),
+        Jump::Mirror => "depth_mirror".into(),
     }
 }
 
@@ -123,8 +123,7 @@ fn main() -> Result<()> {
                     .collect();
                 let (s_true, _) = shading.misfit(&body, &cam, &luma, mask, &pose);
                 let others = Jump::all()
-                    .filter_map(|jump| jump.apply(&body, &pose).map(|p| (jump_name(jump), p)))
-                    .chain([("depth_mirror".to_string(), depth_mirror(&pose))]);
+                    .filter_map(|jump| jump.apply(&body, &pose).map(|p| (jump_name(jump), p)));
                 for (name, other) in others {
                     let Some(d) = outlines.disagreement(&body, &cam, &target, &other) else {
                         continue;
