@@ -10,7 +10,7 @@
 //!
 //! ```text
 //! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--one-way]
-//!     [--recover-spike K] [--w-prior W] [--bound N]
+//!     [--recover-spike K] [--w-prior W] [--refit-anchor W] [--bound N]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
@@ -20,7 +20,8 @@
 //! the second pass (`TrackOptions::two_way`); `--recover-spike K` sets the cost
 //! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none);
 //! `--w-prior W` weighs the built-in pose prior in (`Weights::prior`, 20 by
-//! default, 0 for none).
+//! default, 0 for none); `--refit-anchor W` sets the refit's pull toward its start
+//! (`TrackOptions::refit_anchor`, 0 for none).
 //!
 //! `--bound N` asks how far the body model itself can go: on every frame with a
 //! person, CMA-ES searches for the pose (and, in a second search, the pose and the
@@ -48,7 +49,7 @@ use monocap::body::params::{MOTION, MOTION_COUNT, SHAPE, SHAPE_COUNT};
 use monocap::body::raster::render_mask;
 use monocap::body::{Body, Camera, Mask, Pose, ShapeValues};
 use monocap::track::run::{track_clip, ClipTrack, ClipTrackOptions};
-use monocap::track::tracker::TrackOptions;
+use monocap::track::tracker::{check_refit_anchor, TrackOptions, MAX_REFIT_ANCHOR};
 
 const SEQUENCES: [&str; 3] = ["lucia", "dance-twirl", "tennis"];
 /// The project's stated target for the mean IoU of a sequence.
@@ -110,6 +111,7 @@ fn main() -> Result<()> {
     let mut two_way = TrackOptions::default().two_way;
     let mut recover_spike = TrackOptions::default().recover_spike;
     let mut w_prior = TrackOptions::default().weights.prior;
+    let mut refit_anchor = TrackOptions::default().refit_anchor;
     let mut bound = 0usize;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
@@ -145,6 +147,12 @@ fn main() -> Result<()> {
                 Some(v) if v.is_finite() && v >= 0.0 => w_prior = v,
                 _ => bail!("--w-prior: expected a number ≥ 0"),
             }
+        } else if a == "--refit-anchor" {
+            let v = args.next().and_then(|v| v.to_str()?.parse::<f64>().ok());
+            match v {
+                Some(v) if check_refit_anchor(v, "--refit-anchor").is_ok() => refit_anchor = v,
+                _ => bail!("--refit-anchor: expected a number from 0 to {MAX_REFIT_ANCHOR}"),
+            }
         } else {
             picture = PathBuf::from(a);
         }
@@ -162,6 +170,7 @@ fn main() -> Result<()> {
     track.two_way = two_way;
     track.recover_spike = recover_spike;
     track.weights.prior = w_prior;
+    track.refit_anchor = refit_anchor;
 
     let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;

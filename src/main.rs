@@ -314,6 +314,11 @@ struct RefitArgs {
     /// this (0: one run everywhere; 1: all of --refit-runs on every frame).
     #[arg(long, default_value_t = monocap::track::tracker::REFIT_AGAIN_IOU)]
     refit_again_iou: f64,
+    /// The refit's pull toward the neighbours' average it starts from, per squared
+    /// length scale each parameter moves from it (0 for none; 0 to 10000): what
+    /// the silhouette leaves free stays smooth.
+    #[arg(long, default_value_t = monocap::track::tracker::REFIT_ANCHOR)]
+    refit_anchor: f64,
 }
 
 impl RefitArgs {
@@ -360,6 +365,9 @@ impl RefitArgs {
         monocap::track::tracker::check_refit_again_iou(self.refit_again_iou, "--refit-again-iou")
             .map_err(anyhow::Error::msg)?;
         track.refit_again_iou = self.refit_again_iou;
+        monocap::track::tracker::check_refit_anchor(self.refit_anchor, "--refit-anchor")
+            .map_err(anyhow::Error::msg)?;
+        track.refit_anchor = self.refit_anchor;
         Ok(())
     }
 }

@@ -448,6 +448,10 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_again_iou": 1.0}), true);
     check(serde_json::json!({"refit_again_iou": 1.5}), false);
     check(serde_json::json!({"refit_again_iou": -0.1}), false);
+    check(serde_json::json!({"refit_anchor": 0.0}), true);
+    check(serde_json::json!({"refit_anchor": 10000.0}), true);
+    check(serde_json::json!({"refit_anchor": 10000.5}), false);
+    check(serde_json::json!({"refit_anchor": -1.0}), false);
     check(serde_json::json!({"switch_penalty": 0.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.5}), false);

@@ -8,6 +8,7 @@ use std::path::Path;
 use std::process::Output;
 
 use common::{monocap, s, TempDir};
+use monocap::body::params::{MOTION, MOTION_COUNT};
 use monocap::body::{Body, Camera, Mask};
 use monocap::clip::write::{self, Frame};
 use monocap::motion::bvh::Bvh;
@@ -560,6 +561,11 @@ fn bad_input_gives_one_clear_line() {
         "--refit-again-iou 1.5: expected 0",
     );
     assert_fails_with(
+        "refit anchor",
+        &monocap(&["track", s(&clip), "-o", s(&out), "--refit-anchor=-1"]),
+        "--refit-anchor -1: expected 0",
+    );
+    assert_fails_with(
         "switch penalty",
         &monocap(&["track", s(&clip), "-o", s(&out), "--switch-penalty", "1001"]),
         "--switch-penalty 1001",
@@ -1077,6 +1083,59 @@ fn the_smoothed_refit_searches_every_frame_again() {
     );
     assert!(changed * 2 > frames.len(), "{changed} frames changed");
     assert!(iou_on > iou_off - 0.02, "IoU {iou_off:.3} -> {iou_on:.3}");
+}
+
+/// The refit's anchor pulls each frame toward the average of its neighbours'
+/// poses: a strong pull leaves a smoother track (the poses' second differences,
+/// in length scales, smaller) than none, while the model still covers the person
+/// about as well.
+#[test]
+fn the_refit_anchor_smooths_the_track() {
+    let (frames, opts) = run_colour_inputs();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let run = |refit_anchor: f64| {
+        let opts = TrackOptions {
+            refit_anchor,
+            ..TrackOptions::default()
+        };
+        track_copies(&cam, &frames, opts)
+    };
+    let (free, pulled) = (run(0.0), run(1000.0));
+    let roughness = |t: &Track| -> f64 {
+        let poses: Vec<_> = t
+            .frames
+            .iter()
+            .filter(|f| f.person)
+            .map(|f| f.pose)
+            .collect();
+        poses
+            .windows(3)
+            .map(|w| {
+                (0..MOTION_COUNT)
+                    .map(|k| ((w[0][k] - 2.0 * w[1][k] + w[2][k]) / MOTION[k].scale).powi(2))
+                    .sum::<f64>()
+            })
+            .sum()
+    };
+    let mean = |t: &Track, f: fn(&TrackedFrame) -> Option<f64>| {
+        let v: Vec<f64> = t.frames.iter().filter_map(f).collect();
+        v.iter().sum::<f64>() / v.len() as f64
+    };
+    let (rough_free, rough_pulled) = (roughness(&free), roughness(&pulled));
+    let (iou_free, iou_pulled) = (mean(&free, |f| f.iou), mean(&pulled, |f| f.iou));
+    let (cost_free, cost_pulled) = (mean(&free, |f| f.cost), mean(&pulled, |f| f.cost));
+    println!(
+        "refit anchor 0 -> 1000: roughness {rough_free:.1} -> {rough_pulled:.1}, \
+         mean IoU {iou_free:.3} -> {iou_pulled:.3}, mean cost {cost_free:.1} -> {cost_pulled:.1}"
+    );
+    assert!(
+        rough_pulled < 0.8 * rough_free,
+        "{rough_free} -> {rough_pulled}"
+    );
+    assert!(
+        iou_pulled > iou_free - 0.03,
+        "IoU {iou_free:.3} -> {iou_pulled:.3}"
+    );
 }
 
 /// The refit's runs after the first go only to the frames the first leaves fitted

@@ -7,7 +7,7 @@ use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
 use crate::track::tracker::{
     check_middle_starts, check_parted_middle_starts, check_refit, check_refit_again_iou,
-    check_switch_penalty, MAX_POLISH_EVALS,
+    check_refit_anchor, check_switch_penalty, MAX_POLISH_EVALS,
 };
 use crate::vision::background::EmptyFrames;
 
@@ -38,6 +38,10 @@ pub struct JobOptions {
     /// everywhere) to 1 (every run on every frame; default 0.85).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_again_iou: Option<f64>,
+    /// The refit's pull toward the neighbours' average it starts from, 0 (none)
+    /// to 10,000 (default 16; see `TrackOptions::refit_anchor`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_anchor: Option<f64>,
     /// The second pass, backwards over each block of up to 150 frames (default true;
     /// see `TrackOptions::two_way`): more accurate; false (no middle pass either)
     /// is about twice as fast.
@@ -225,6 +229,10 @@ impl JobOptions {
         if let Some(iou) = self.refit_again_iou {
             check_refit_again_iou(iou, "refit_again_iou")?;
             o.track.refit_again_iou = iou;
+        }
+        if let Some(w) = self.refit_anchor {
+            check_refit_anchor(w, "refit_anchor")?;
+            o.track.refit_anchor = w;
         }
         if let Some(t) = self.middle_pass {
             o.track.middle_pass = t;

@@ -24,7 +24,7 @@
 
 use super::outlines::FrameEdges;
 use super::prior::{PosePrior, PriorFocus};
-use crate::body::params::{within_limits, Pose};
+use crate::body::params::{within_limits, Pose, MOTION};
 use crate::body::parts::Material;
 use crate::body::raster::{render_fragments, render_parts, span_parts, Fragments, Mask, PartSpans};
 use crate::body::skeleton::{joints_moved_by, Joint, Posed, Tip, JOINT_COUNT};
@@ -522,6 +522,8 @@ pub struct Evaluator<'a> {
     prior: Option<&'a PosePrior>,
     /// The prior at the focus's base pose ([`Evaluator::focus`]).
     prior_focus: Option<PriorFocus>,
+    /// The smoothed refit's pull toward its start ([`Evaluator::with_anchor`]).
+    anchor: Option<(Pose, f64)>,
 }
 
 impl<'a> Evaluator<'a> {
@@ -573,6 +575,7 @@ impl<'a> Evaluator<'a> {
             radius: joint_radii(body),
             prior: None,
             prior_focus: None,
+            anchor: None,
         }
     }
 
@@ -580,6 +583,32 @@ impl<'a> Evaluator<'a> {
     pub fn with_prior(mut self, prior: Option<&'a PosePrior>) -> Self {
         self.prior = prior.filter(|_| self.weights.prior > 0.0);
         self
+    }
+
+    /// This evaluator with a pull toward `anchor` added to its cost: `weight` ×
+    /// Σ_k ((β_k − a_k) / λ_k)², each parameter's distance in its length scales λ
+    /// ([`crate::body::params::MotionParam::scale`]); none at a weight of 0. The
+    /// smoothed refit anchors each frame at the Gaussian average of its
+    /// neighbours' poses it starts from
+    /// ([`crate::track::tracker::TrackOptions::refit_anchor`]), so that what the
+    /// silhouette leaves free stays smooth.
+    pub fn with_anchor(mut self, anchor: Pose, weight: f64) -> Self {
+        self.anchor = (weight > 0.0).then_some((anchor, weight));
+        self
+    }
+
+    /// The anchor's share of the cost at `pose` ([`Evaluator::with_anchor`]; 0
+    /// without one).
+    pub fn anchor_cost(&self, pose: &Pose) -> f64 {
+        let Some((a, w)) = &self.anchor else {
+            return 0.0;
+        };
+        let sum: f64 = MOTION
+            .iter()
+            .enumerate()
+            .map(|(k, m)| ((pose[k] - a[k]) / m.scale).powi(2))
+            .sum();
+        w * sum
     }
 
     /// The pose prior's share of F at `pose`.
@@ -685,7 +714,8 @@ impl<'a> Evaluator<'a> {
             return self.target.base
                 + covered
                 + self.weights.extremity * self.end_distances()
-                + self.prior_cost(pose);
+                + self.prior_cost(pose)
+                + self.anchor_cost(pose);
         }
         let mut total = self.target.base + self.all.fixed_sum + self.limbs.fixed_sum;
         if let Some(skin) = &mut self.skin {
@@ -759,7 +789,10 @@ impl<'a> Evaluator<'a> {
                 y1,
             );
         }
-        total + self.weights.extremity * self.end_distances() + self.prior_cost(pose)
+        total
+            + self.weights.extremity * self.end_distances()
+            + self.prior_cost(pose)
+            + self.anchor_cost(pose)
     }
 
     /// The model's whole silhouette at `pose`.
@@ -1759,6 +1792,37 @@ mod tests {
                     "{focused} vs {with}"
                 );
             }
+        }
+    }
+
+    #[test]
+    fn the_anchor_adds_its_pull_in_length_scales() {
+        let (body, cam, pose) = scene();
+        let (_, target) = target_of(&body, &cam, &pose);
+        let mut moved = pose;
+        moved[ix::L_HIP + 2] += 2.0 * MOTION[ix::L_HIP + 2].scale;
+        moved[ix::R_KNEE] += MOTION[ix::R_KNEE].scale;
+        for smooth in [true, false] {
+            let w = Weights {
+                smooth,
+                ..Weights::default()
+            };
+            let plain = |p: &Pose| Evaluator::new(&body, &cam, &target, w, None).cost(p);
+            let mut ev = Evaluator::new(&body, &cam, &target, w, None).with_anchor(pose, 3.0);
+            // (2² + 1²) squared length scales at 3 each.
+            assert!((ev.anchor_cost(&moved) - 15.0).abs() < 1e-9);
+            assert_eq!(ev.anchor_cost(&pose), 0.0);
+            for p in [pose, moved] {
+                let got = ev.cost(&p);
+                let want = plain(&p) + ev.anchor_cost(&p);
+                assert!(
+                    (got - want).abs() < 1e-9 * want.abs().max(1.0),
+                    "{got} vs {want}"
+                );
+            }
+            // A weight of 0 is no anchor.
+            let none = Evaluator::new(&body, &cam, &target, w, None).with_anchor(pose, 0.0);
+            assert_eq!(none.anchor_cost(&moved), 0.0);
         }
     }
 
