@@ -10,7 +10,7 @@
 //!
 //! ```text
 //! cargo run --release --example davis_track [picture.png] [--track-rewards] [--reward-rim N] [--polish-evals N] [--one-way]
-//!     [--recover-spike K] [--w-prior W] [--refit-anchor W] [--bound N]
+//!     [--recover-spike K] [--w-prior W] [--refit-anchor W] [--refit-rounds N] [--bound N]
 //! ```
 //!
 //! `--track-rewards` pays the edge and region rewards while tracking too (the
@@ -21,7 +21,8 @@
 //! spike that starts a recovery (`TrackOptions::recover_spike`, 0 for none);
 //! `--w-prior W` weighs the built-in pose prior in (`Weights::prior`, 20 by
 //! default, 0 for none); `--refit-anchor W` sets the refit's pull toward its start
-//! (`TrackOptions::refit_anchor`, 0 for none).
+//! (`TrackOptions::refit_anchor`, 0 for none) and `--refit-rounds N` its rounds
+//! (`TrackOptions::refit_rounds`).
 //!
 //! `--bound N` asks how far the body model itself can go: on every frame with a
 //! person, CMA-ES searches for the pose (and, in a second search, the pose and the
@@ -49,7 +50,9 @@ use monocap::body::params::{MOTION, MOTION_COUNT, SHAPE, SHAPE_COUNT};
 use monocap::body::raster::render_mask;
 use monocap::body::{Body, Camera, Mask, Pose, ShapeValues};
 use monocap::track::run::{track_clip, ClipTrack, ClipTrackOptions};
-use monocap::track::tracker::{check_refit_anchor, TrackOptions, MAX_REFIT_ANCHOR};
+use monocap::track::tracker::{
+    check_refit_anchor, check_refit_rounds, TrackOptions, MAX_REFIT_ANCHOR, MAX_REFIT_ROUNDS,
+};
 
 const SEQUENCES: [&str; 3] = ["lucia", "dance-twirl", "tennis"];
 /// The project's stated target for the mean IoU of a sequence.
@@ -112,6 +115,7 @@ fn main() -> Result<()> {
     let mut recover_spike = TrackOptions::default().recover_spike;
     let mut w_prior = TrackOptions::default().weights.prior;
     let mut refit_anchor = TrackOptions::default().refit_anchor;
+    let mut refit_rounds = TrackOptions::default().refit_rounds;
     let mut bound = 0usize;
     let mut args = std::env::args_os().skip(1);
     while let Some(a) = args.next() {
@@ -153,6 +157,12 @@ fn main() -> Result<()> {
                 Some(v) if check_refit_anchor(v, "--refit-anchor").is_ok() => refit_anchor = v,
                 _ => bail!("--refit-anchor: expected a number from 0 to {MAX_REFIT_ANCHOR}"),
             }
+        } else if a == "--refit-rounds" {
+            let v = args.next().and_then(|v| v.to_str()?.parse::<usize>().ok());
+            match v {
+                Some(v) if check_refit_rounds(v, "--refit-rounds").is_ok() => refit_rounds = v,
+                _ => bail!("--refit-rounds: expected a whole number from 1 to {MAX_REFIT_ROUNDS}"),
+            }
         } else {
             picture = PathBuf::from(a);
         }
@@ -171,6 +181,7 @@ fn main() -> Result<()> {
     track.recover_spike = recover_spike;
     track.weights.prior = w_prior;
     track.refit_anchor = refit_anchor;
+    track.refit_rounds = refit_rounds;
 
     let tmp = std::env::temp_dir().join(format!("monocap-davis-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;

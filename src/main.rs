@@ -319,6 +319,10 @@ struct RefitArgs {
     /// the silhouette leaves free stays smooth.
     #[arg(long, default_value_t = monocap::track::tracker::REFIT_ANCHOR)]
     refit_anchor: f64,
+    /// Rounds of the smoothed refit, 1 to 4: each after the first searches every
+    /// frame again from the average of the round before's answers.
+    #[arg(long, default_value_t = monocap::track::tracker::REFIT_ROUNDS)]
+    refit_rounds: usize,
 }
 
 impl RefitArgs {
@@ -368,6 +372,9 @@ impl RefitArgs {
         monocap::track::tracker::check_refit_anchor(self.refit_anchor, "--refit-anchor")
             .map_err(anyhow::Error::msg)?;
         track.refit_anchor = self.refit_anchor;
+        monocap::track::tracker::check_refit_rounds(self.refit_rounds, "--refit-rounds")
+            .map_err(anyhow::Error::msg)?;
+        track.refit_rounds = self.refit_rounds;
         Ok(())
     }
 }

@@ -452,6 +452,10 @@ fn documented_option_limits_are_the_services() {
     check(serde_json::json!({"refit_anchor": 10000.0}), true);
     check(serde_json::json!({"refit_anchor": 10000.5}), false);
     check(serde_json::json!({"refit_anchor": -1.0}), false);
+    check(serde_json::json!({"refit_rounds": 1}), true);
+    check(serde_json::json!({"refit_rounds": 4}), true);
+    check(serde_json::json!({"refit_rounds": 0}), false);
+    check(serde_json::json!({"refit_rounds": 5}), false);
     check(serde_json::json!({"switch_penalty": 0.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.0}), true);
     check(serde_json::json!({"switch_penalty": 1000.5}), false);

@@ -565,6 +565,13 @@ fn bad_input_gives_one_clear_line() {
         &monocap(&["track", s(&clip), "-o", s(&out), "--refit-anchor=-1"]),
         "--refit-anchor -1: expected 0",
     );
+    for bad in ["0", "5"] {
+        assert_fails_with(
+            "refit rounds",
+            &monocap(&["track", s(&clip), "-o", s(&out), "--refit-rounds", bad]),
+            &format!("--refit-rounds {bad}: expected 1 to 4"),
+        );
+    }
     assert_fails_with(
         "switch penalty",
         &monocap(&["track", s(&clip), "-o", s(&out), "--switch-penalty", "1001"]),
@@ -1085,6 +1092,31 @@ fn the_smoothed_refit_searches_every_frame_again() {
     assert!(iou_on > iou_off - 0.02, "IoU {iou_off:.3} -> {iou_on:.3}");
 }
 
+/// A track's roughness: the summed squared second differences of its poses (those
+/// with a person), each parameter in its length scale.
+fn roughness(t: &Track) -> f64 {
+    let poses: Vec<_> = t
+        .frames
+        .iter()
+        .filter(|f| f.person)
+        .map(|f| f.pose)
+        .collect();
+    poses
+        .windows(3)
+        .map(|w| {
+            (0..MOTION_COUNT)
+                .map(|k| ((w[0][k] - 2.0 * w[1][k] + w[2][k]) / MOTION[k].scale).powi(2))
+                .sum::<f64>()
+        })
+        .sum()
+}
+
+/// The mean over a track's frames of what `f` gives (None left out).
+fn mean(t: &Track, f: fn(&TrackedFrame) -> Option<f64>) -> f64 {
+    let v: Vec<f64> = t.frames.iter().filter_map(f).collect();
+    v.iter().sum::<f64>() / v.len() as f64
+}
+
 /// The refit's anchor pulls each frame toward the average of its neighbours'
 /// poses: a strong pull leaves a smoother track (the poses' second differences,
 /// in length scales, smaller) than none, while the model still covers the person
@@ -1101,26 +1133,6 @@ fn the_refit_anchor_smooths_the_track() {
         track_copies(&cam, &frames, opts)
     };
     let (free, pulled) = (run(0.0), run(1000.0));
-    let roughness = |t: &Track| -> f64 {
-        let poses: Vec<_> = t
-            .frames
-            .iter()
-            .filter(|f| f.person)
-            .map(|f| f.pose)
-            .collect();
-        poses
-            .windows(3)
-            .map(|w| {
-                (0..MOTION_COUNT)
-                    .map(|k| ((w[0][k] - 2.0 * w[1][k] + w[2][k]) / MOTION[k].scale).powi(2))
-                    .sum::<f64>()
-            })
-            .sum()
-    };
-    let mean = |t: &Track, f: fn(&TrackedFrame) -> Option<f64>| {
-        let v: Vec<f64> = t.frames.iter().filter_map(f).collect();
-        v.iter().sum::<f64>() / v.len() as f64
-    };
     let (rough_free, rough_pulled) = (roughness(&free), roughness(&pulled));
     let (iou_free, iou_pulled) = (mean(&free, |f| f.iou), mean(&pulled, |f| f.iou));
     let (cost_free, cost_pulled) = (mean(&free, |f| f.cost), mean(&pulled, |f| f.cost));
@@ -1138,10 +1150,46 @@ fn the_refit_anchor_smooths_the_track() {
     );
 }
 
+/// A second round of the refit searches every frame again from the average of
+/// the first round's answers: the poses change, the track comes out smoother than
+/// after one round, and the model still covers the person about as well. (That
+/// the rounds' helper threads give the same track as one thread is
+/// `helper_threads_track_exactly_as_one_thread`, which runs the default two.)
+#[test]
+fn a_second_refit_round_smooths_the_track_again() {
+    let (frames, opts) = run_colour_inputs();
+    let cam = Camera::new(opts.width, opts.height, opts.fov_deg);
+    let run = |refit_rounds: usize| {
+        let opts = TrackOptions {
+            refit_rounds,
+            ..TrackOptions::default()
+        };
+        track_copies(&cam, &frames, opts)
+    };
+    let (one, two) = (run(1), run(2));
+    let changed = two
+        .frames
+        .iter()
+        .zip(&one.frames)
+        .filter(|(a, b)| a.pose != b.pose)
+        .count();
+    let (rough_one, rough_two) = (roughness(&one), roughness(&two));
+    let (iou_one, iou_two) = (mean(&one, |f| f.iou), mean(&two, |f| f.iou));
+    println!(
+        "refit rounds 1 -> 2: {changed} of {} frames changed, roughness {rough_one:.1} -> \
+         {rough_two:.1}, mean IoU {iou_one:.3} -> {iou_two:.3}",
+        frames.len()
+    );
+    assert!(changed * 2 > frames.len(), "{changed} frames changed");
+    assert!(rough_two < rough_one, "{rough_one} -> {rough_two}");
+    assert!(iou_two > iou_one - 0.02, "IoU {iou_one:.3} -> {iou_two:.3}");
+}
+
 /// The refit's runs after the first go only to the frames the first leaves fitted
 /// poorly: with `refit_again_iou` at the median of one run's IoUs, a frame at or
 /// above it keeps the one run's answer and a frame under it gets the two runs'
-/// answer, exactly (each frame's refit depends only on the first pass).
+/// answer, exactly (in one round of the refit each frame's refit depends only on
+/// the first pass).
 #[test]
 fn the_refit_searches_again_only_where_the_fit_is_poor() {
     let (frames, opts) = run_colour_inputs();
@@ -1150,6 +1198,7 @@ fn the_refit_searches_again_only_where_the_fit_is_poor() {
         let opts = TrackOptions {
             refit_runs,
             refit_again_iou,
+            refit_rounds: 1,
             two_way: false,
             middle_pass: false,
             ..TrackOptions::default()

@@ -7,7 +7,7 @@ use crate::track::keyframes::Keyframes;
 use crate::track::run::{ClipTrackOptions, MAX_WORK_HEIGHT};
 use crate::track::tracker::{
     check_middle_starts, check_parted_middle_starts, check_refit, check_refit_again_iou,
-    check_refit_anchor, check_switch_penalty, MAX_POLISH_EVALS,
+    check_refit_anchor, check_refit_rounds, check_switch_penalty, MAX_POLISH_EVALS,
 };
 use crate::vision::background::EmptyFrames;
 
@@ -42,6 +42,10 @@ pub struct JobOptions {
     /// to 10,000 (default 16; see `TrackOptions::refit_anchor`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub refit_anchor: Option<f64>,
+    /// Rounds of the smoothed refit, 1 to 4 (default 2; see
+    /// `TrackOptions::refit_rounds`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub refit_rounds: Option<usize>,
     /// The second pass, backwards over each block of up to 150 frames (default true;
     /// see `TrackOptions::two_way`): more accurate; false (no middle pass either)
     /// is about twice as fast.
@@ -233,6 +237,10 @@ impl JobOptions {
         if let Some(w) = self.refit_anchor {
             check_refit_anchor(w, "refit_anchor")?;
             o.track.refit_anchor = w;
+        }
+        if let Some(n) = self.refit_rounds {
+            check_refit_rounds(n, "refit_rounds")?;
+            o.track.refit_rounds = n;
         }
         if let Some(t) = self.middle_pass {
             o.track.middle_pass = t;
