@@ -278,6 +278,12 @@ struct RefitArgs {
     /// accurate.
     #[arg(long)]
     no_exemplar_starts: bool,
+    /// Leave out the starts' depth mirrors (by default, unless the person travels,
+    /// each start is also tried mirrored front to back across the line of sight,
+    /// refined, and the start that tracks the next 40 frames at the lowest cost is
+    /// kept). Faster to start, less accurate.
+    #[arg(long)]
+    no_mirror_starts: bool,
     /// Probe the initial candidates as the frames are tracked, with every restart
     /// and jump (by default once per frame and without jumps). Slower.
     #[arg(long)]
@@ -347,6 +353,7 @@ impl RefitArgs {
         track.parted_share_max = self.parted_share_max;
         track.round_start = !self.one_start;
         track.exemplar_starts = !self.no_exemplar_starts;
+        track.mirror_starts = !self.no_mirror_starts;
         track.full_probes = self.full_probes;
         track.mirror_jumps = self.mirror_jumps;
         monocap::track::tracker::check_second_pass_window(

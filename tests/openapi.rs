@@ -502,11 +502,12 @@ fn documented_option_limits_are_the_services() {
     // The passes after the first and the second start: booleans, on by default,
     // off from a query too.
     type On = fn(&monocap::track::tracker::TrackOptions) -> bool;
-    let passes: [(&str, On); 4] = [
+    let passes: [(&str, On); 5] = [
         ("two_way", |t| t.two_way),
         ("middle_pass", |t| t.middle_pass),
         ("round_start", |t| t.round_start),
         ("exemplar_starts", |t| t.exemplar_starts),
+        ("mirror_starts", |t| t.mirror_starts),
     ];
     for (name, on) in passes {
         check(serde_json::json!({ name: true }), true);

@@ -78,6 +78,12 @@ pub struct JobOptions {
     /// `TrackOptions::exemplar_starts`): more accurate; false starts faster.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub exemplar_starts: Option<bool>,
+    /// Each start of a person in place also tried as its depth mirror, front to
+    /// back across the line of sight, the start that tracks the next 40 frames at
+    /// the lowest cost kept (default true; see `TrackOptions::mirror_starts`): more
+    /// accurate; false starts faster.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub mirror_starts: Option<bool>,
     /// The initial candidates probed with every restart and jump, as the frames are
     /// tracked (default false; see `TrackOptions::full_probes`): slower.
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -258,6 +264,9 @@ impl JobOptions {
         }
         if let Some(t) = self.exemplar_starts {
             o.track.exemplar_starts = t;
+        }
+        if let Some(t) = self.mirror_starts {
+            o.track.mirror_starts = t;
         }
         if let Some(t) = self.full_probes {
             o.track.full_probes = t;

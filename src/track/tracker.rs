@@ -1,8 +1,10 @@
 //! The tracker (method.md §5): initialise on one frame, then fit every frame from
 //! its neighbour's solution with the biased, hierarchical downhill simplex. By
 //! default the initial frame is fitted twice, from the start shape and from it
-//! with a round trunk, and the start that tracks the buffered frames after it at
-//! the lower cost goes on ([`TrackOptions::round_start`]).
+//! with a round trunk, each start of a person in place is also tried as its depth
+//! mirror, and the start that tracks the buffered frames after it at the lowest
+//! cost goes on
+//! ([`TrackOptions::round_start`], [`TrackOptions::mirror_starts`]).
 //!
 //! Frames arrive as a stream ([`FrameInput`]: the silhouette and, for a colour clip,
 //! the frame, at the working resolution). What is kept, and why:
@@ -11,7 +13,7 @@
 //!   pixel): the frames before it are tracked backwards from it once it is fitted.
 //!   The automatic choice looks at most [`TrackOptions::init_window`] frames with a
 //!   person, so this buffer is bounded; a user-chosen initial frame must lie within
-//!   the first [`MAX_INIT_FRAME`] frames, and with two starts the
+//!   the first [`MAX_INIT_FRAME`] frames, and with several starts the
 //!   [`START_PROBE_FRAMES`] frames after it are read before it is fitted;
 //! - after that, only the previous frame's features (temporal coherence of the
 //!   extremity candidates) and one pose per frame;
@@ -85,7 +87,8 @@ const HYPOTHESIS_FRAMES: usize = 15;
 const PROBE_RESTARTS: usize = 1;
 
 /// Frames tracked from each initialisation's start to choose between the
-/// initialisations ([`TrackOptions::round_start`]).
+/// initialisations and their depth mirrors ([`TrackOptions::round_start`],
+/// [`TrackOptions::mirror_starts`]).
 const START_PROBE_FRAMES: usize = 40;
 
 /// Frames either side of the initial frame that measure the person's travel
@@ -628,6 +631,17 @@ pub struct TrackOptions {
     /// from the captures as starts"). No effect without a pose prior, or with one
     /// whose file holds no exemplars.
     pub exemplar_starts: bool,
+    /// Try each start's depth mirror as one more start (true by default): the
+    /// start's pose reflected front to back across the line of sight
+    /// ([`super::flips::depth_mirror`]: nearly the same silhouette, left and right
+    /// exchanged, the heading mirrored), refined on the initial frame, then
+    /// tracked over the [`START_PROBE_FRAMES`] frames after it like the other
+    /// starts; the start that tracks them at the lowest summed cost goes on. The
+    /// initial frame alone hardly tells a body from its depth mirror; the frames
+    /// after it tell them apart better (README, "The depth mirror as a start").
+    /// Not for a person who travels: the direction of travel chooses between a
+    /// start and its mirror there ([`Tracker::choose_initial`]).
+    pub mirror_starts: bool,
     /// Probe the initial candidates as the frames are tracked (false by default):
     /// each candidate's [`HYPOTHESIS_FRAMES`] frames searched with every restart
     /// and every jump. By default the probes search each frame once
@@ -711,6 +725,7 @@ impl Default for TrackOptions {
             start_shape: TYPICAL_SHAPE,
             round_start: true,
             exemplar_starts: true,
+            mirror_starts: true,
             full_probes: false,
             init_joint_evals: INIT_JOINT_EVALS,
             pose_prior: Some(PosePrior::builtin()),
@@ -943,10 +958,16 @@ impl Tracker {
         let mut pending: Vec<Pending> = Vec::new();
         let mut person_frames = 0;
         let mut exhausted = false;
-        // Two starts track the frames after the initial one to choose between them.
+        // Several starts track the frames after the initial one to choose between
+        // them: two initialisations, each start and its depth mirror.
         let two_starts =
             self.opts.round_start && self.opts.known_shape.is_none() && self.opts.initial.is_none();
-        let probe_len = if two_starts { START_PROBE_FRAMES } else { 0 };
+        let mirror_starts = self.opts.mirror_starts && self.opts.initial.is_none();
+        let probe_len = if two_starts || mirror_starts {
+            START_PROBE_FRAMES
+        } else {
+            0
+        };
         loop {
             let enough = match self.opts.init_frame {
                 Some(f) => pending.len() > f + probe_len,
@@ -1064,6 +1085,29 @@ impl Tracker {
                 }
             };
             picked.push((*shape, pose));
+        }
+        if mirror_starts {
+            // Each start's depth mirror, refined on the initial frame, unless the
+            // person travels: then the direction of travel has chosen between the
+            // start and its mirror ([`Tracker::choose_initial`]). Independent of
+            // each other: side by side.
+            let in_place: Vec<(ShapeValues, Pose)> = picked
+                .iter()
+                .filter(|(shape, pose)| {
+                    let body = Body::new(shape);
+                    self.travel(&body, pose, &targets, init).is_none()
+                })
+                .copied()
+                .collect();
+            let mirrors = par_map(&in_place, self.threads(), |(shape, pose)| {
+                let (mirror, evals) = self.mirror_start(shape, pose, init_target);
+                (*shape, mirror, evals)
+            });
+            for (shape, mirror, evals) in mirrors {
+                timing.evals += evals;
+                picked.push((shape, mirror));
+            }
+            self.check_stop()?;
         }
         let ((shape, init_pose), mut probed) = match picked[..] {
             [one] => (one, Probed::new()),
@@ -1520,7 +1564,8 @@ impl Tracker {
     }
 
     /// The start, shape and initial pose, among `starts` (one per initialisation,
-    /// [`TrackOptions::round_start`]) that tracks the [`START_PROBE_FRAMES`] frames
+    /// [`TrackOptions::round_start`], and each one's depth mirror,
+    /// [`TrackOptions::mirror_starts`]) that tracks the [`START_PROBE_FRAMES`] frames
     /// after the initial frame `init` (those before it when the clip ends first)
     /// at the lowest summed cost, the initial frame's included; its tracked frames;
     /// and the evaluations spent. The frames are tracked as the first pass tracks
@@ -1567,6 +1612,18 @@ impl Tracker {
         Ok((start, tracked, evals))
     }
 
+    /// The depth mirror of the start `pose` ([`super::flips::depth_mirror`]) for a
+    /// body of `shape`, refined on the initial frame's `target` as the
+    /// initialisation fits a heading (from the joint limits, three runs), under
+    /// the tracking objective by which the starts are compared
+    /// ([`TrackOptions::mirror_starts`]); and the evaluations spent.
+    fn mirror_start(&self, shape: &ShapeValues, pose: &Pose, target: &Target) -> (Pose, u64) {
+        let body = Body::new(shape);
+        let mirror = super::flips::depth_mirror(pose);
+        let (mirror, _, evals) = Search::initial(self, &body).fit_wide_counted(target, mirror, 3);
+        (mirror, evals)
+    }
+
     /// The initial pose among the probed candidates (each with its summed cost over
     /// the probe frames) and the evaluations spent choosing: [`choose_hypothesis`],
     /// unless the person travels. People walk and run forwards, so a travelling
@@ -1585,9 +1642,7 @@ impl Tracker {
         init: usize,
     ) -> (Pose, u64) {
         let chosen = choose_hypothesis(probes, &self.camera);
-        let ground = sole_height(body, &body.posed(&chosen));
-        let travel = self.silhouette_travel(targets, init, ground);
-        let Some(travel) = travel.filter(|t| t.speed() >= TRAVEL_SPEED) else {
+        let Some(travel) = self.travel(body, &chosen, targets, init) else {
             return (chosen, 0);
         };
         // Refined under the paper's objective, as the other candidates were.
@@ -1607,6 +1662,21 @@ impl Tracker {
             .unwrap_or(chosen);
         let clearly = along(&best) > TRAVEL_ALONG && along(&best) - along(&chosen) > TRAVEL_MARGIN;
         (if clearly { best } else { chosen }, evals)
+    }
+
+    /// The person's travel around the initial frame `init`, the ground under
+    /// `body` posed as `pose` there, when they travel at [`TRAVEL_SPEED`] or more
+    /// ([`Tracker::silhouette_travel`]).
+    fn travel(
+        &self,
+        body: &Body,
+        pose: &Pose,
+        targets: &[Option<&Target>],
+        init: usize,
+    ) -> Option<Travel> {
+        let ground = sole_height(body, &body.posed(pose));
+        self.silhouette_travel(targets, init, ground)
+            .filter(|t| t.speed() >= TRAVEL_SPEED)
     }
 
     /// The person's travel over up to [`TRAVEL_FRAMES`] frames either side of
