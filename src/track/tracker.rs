@@ -3,8 +3,7 @@
 //! default the initial frame is fitted twice, from the start shape and from it
 //! with a round trunk, each start of a person in place is also tried as its depth
 //! mirror, and the start that tracks the buffered frames after it at the lowest
-//! cost goes on
-//! ([`TrackOptions::round_start`], [`TrackOptions::mirror_starts`]).
+//! cost goes on ([`TrackOptions::round_start`], [`TrackOptions::mirror_starts`]).
 //!
 //! Frames arrive as a stream ([`FrameInput`]: the silhouette and, for a colour clip,
 //! the frame, at the working resolution). What is kept, and why:
