@@ -1,7 +1,9 @@
 //! Renders per second of the silhouette rasterizer at 320×240 and 640×480, of
 //! forward kinematics followed by a render, and of the parts' row spans
 //! (`span_parts`, what the tracker pays per evaluation when it counts shares of
-//! pixels, its default).
+//! pixels, its default); and forward kinematics alone, with every angle new and
+//! with the root's alone new (a search over the global group: the other joints'
+//! rotations are reused from the last posing).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use monocap::body::params::{self, ix, MOTION};
@@ -52,6 +54,27 @@ fn bench(c: &mut Criterion) {
             })
         });
     }
+    group.finish();
+    let mut group = c.benchmark_group("pose");
+    group.throughput(Throughput::Elements(1));
+    let mut out = Posed::default();
+    let mut i = 0;
+    group.bench_function("every angle new", |b| {
+        b.iter(|| {
+            i = (i + 1) % poses.len();
+            body.skeleton.pose(&poses[i], &mut out);
+            out.tips[0]
+        })
+    });
+    let mut turned = poses[0];
+    group.bench_function("the root's alone new", |b| {
+        b.iter(|| {
+            i = (i + 1) % poses.len();
+            turned[ix::ROOT_RY] = poses[i][ix::ROOT_RY];
+            body.skeleton.pose(&turned, &mut out);
+            out.tips[0]
+        })
+    });
     group.finish();
     let mut group = c.benchmark_group("span_parts");
     group.throughput(Throughput::Elements(1));

@@ -273,8 +273,6 @@ struct Prepared {
     x1: i64,
     y0: i64,
     y1: i64,
-    /// Canonical normal → camera normal (unnormalised): R · A⁻¹.
-    normal: Matrix3<f64>,
 }
 
 impl Prepared {
@@ -345,7 +343,6 @@ impl Prepared {
             x1,
             y0,
             y1,
-            normal: rot * Matrix3::from_diagonal(&inv_a),
         })
     }
 
@@ -978,6 +975,10 @@ pub fn render_fragments(body: &Body, posed: &Posed, cam: &Camera, out: &mut Frag
         let Some(prep) = Prepared::new(part, &to_cam, cam) else {
             continue;
         };
+        // Canonical normal → camera normal (unnormalised): R · A⁻¹ (made here, not
+        // in [`Prepared::new`], whose other callers need no normals).
+        let inv_a = Vector3::new(1.0 / part.radii.x, 1.0 / part.radii.y, 1.0 / part.radii.z);
+        let normal = to_cam.rotation.matrix() * Matrix3::from_diagonal(&inv_a);
         for y in prep.y0..=prep.y1 {
             let r = prep.row_base(y as f64 + 0.5);
             let Some((x0, x1)) = prep.row_span(&r) else {
@@ -992,7 +993,7 @@ pub fn render_fragments(body: &Body, posed: &Posed, cam: &Camera, out: &mut Frag
                 if (t as f32) < out.depth[i] {
                     out.depth[i] = t as f32;
                     out.part[i] = pi as u8;
-                    let n = (prep.normal * n).normalize();
+                    let n = (normal * n).normalize();
                     out.normal[i] = [n.x as f32, n.y as f32, n.z as f32];
                 }
             }

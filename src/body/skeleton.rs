@@ -85,7 +85,7 @@ impl Joint {
     }
 
     /// The degrees of freedom this joint's rotation takes from β.
-    pub fn dof(self) -> Dof {
+    pub const fn dof(self) -> Dof {
         use Joint::*;
         match self {
             Hips => Dof::Root,
@@ -348,11 +348,24 @@ impl Skeleton {
         }
     }
 
-    /// Poses joint `j` in `out`, whose frame of its parent is already posed.
+    /// Poses joint `j` in `out`, whose frame of its parent is already posed. The
+    /// joint's rotation in its parent's frame is taken from `out`'s store when its
+    /// angles are the ones it was made from (`Rotations`): a search over a group
+    /// moves the joints below it without turning them.
     #[inline]
     fn pose_joint(&self, j: Joint, pose: &Pose, out: &mut Posed) {
-        let local = self.local(j, pose);
-        out.joints[j.index()] = match j.parent() {
+        let i = j.index();
+        let rotation = *out.rotations.get(j, pose);
+        let local = IsometryMatrix3::from_parts(
+            match j.dof() {
+                Dof::Root => {
+                    Translation3::new(pose[ix::ROOT_TX], pose[ix::ROOT_TY], pose[ix::ROOT_TZ])
+                }
+                _ => Translation3::from(self.offsets[i]),
+            },
+            rotation,
+        );
+        out.joints[i] = match j.parent() {
             Some(p) => out.joints[p.index()] * local,
             None => local,
         };
@@ -362,20 +375,6 @@ impl Skeleton {
     #[inline]
     fn pose_tip(&self, i: usize, t: Tip, out: &mut Posed) {
         out.tips[i] = out.joints[t.joint().index()] * Point3::from(self.tip_offsets[i]);
-    }
-
-    /// Joint `j`'s frame in its parent's at `pose`.
-    fn local(&self, j: Joint, pose: &Pose) -> IsometryMatrix3<f64> {
-        match j.dof() {
-            Dof::Root => IsometryMatrix3::from_parts(
-                Translation3::new(pose[ix::ROOT_TX], pose[ix::ROOT_TY], pose[ix::ROOT_TZ]),
-                root_rotation(pose),
-            ),
-            dof => IsometryMatrix3::from_parts(
-                Translation3::from(self.offsets[j.index()]),
-                joint_rotation(dof, pose),
-            ),
-        }
     }
 
     /// Convenience: a freshly allocated [`Posed`].
@@ -423,6 +422,9 @@ pub fn axis_rotation(axis: Axis, deg: f64) -> Rotation3<f64> {
 pub struct Posed {
     pub joints: [IsometryMatrix3<f64>; JOINT_COUNT],
     pub tips: [Point3<f64>; TIP_COUNT],
+    /// The joints' rotations in their parents' frames as last made, for posing
+    /// again.
+    rotations: Rotations,
 }
 
 impl Default for Posed {
@@ -430,7 +432,77 @@ impl Default for Posed {
         Posed {
             joints: [IsometryMatrix3::identity(); JOINT_COUNT],
             tips: [Point3::origin(); TIP_COUNT],
+            rotations: Rotations::default(),
         }
+    }
+}
+
+/// Each joint's rotation in its parent's frame with the bits of the angles it was
+/// made from: posing again at the same angles takes the stored rotation instead of
+/// three sines and cosines and two matrix products. The rotation depends on the
+/// angles alone (not on the shape), so the store holds whichever skeleton poses it.
+#[derive(Clone, Debug)]
+struct Rotations {
+    /// Per joint, its angles' bits (unused ones 0); [`NOT_MADE`] before the first.
+    made: [[u64; 3]; JOINT_COUNT],
+    rotations: [Rotation3<f64>; JOINT_COUNT],
+}
+
+/// Bits no angle has (a NaN no arithmetic makes): a rotation not made yet.
+const NOT_MADE: [u64; 3] = [u64::MAX; 3];
+
+/// Per joint, the first of its angles in β and how many it takes (0: none).
+const ANGLES: [(usize, usize); JOINT_COUNT] = {
+    let mut out = [(0, 0); JOINT_COUNT];
+    let mut i = 0;
+    while i < JOINT_COUNT {
+        out[i] = match Joint::ALL[i].dof() {
+            Dof::Root => (ix::ROOT_RX, 3),
+            Dof::Three(first) => (first, 3),
+            Dof::One(first) => (first, 1),
+            Dof::Fixed => (0, 0),
+        };
+        i += 1;
+    }
+    out
+};
+
+impl Default for Rotations {
+    fn default() -> Self {
+        Rotations {
+            made: [NOT_MADE; JOINT_COUNT],
+            rotations: [Rotation3::identity(); JOINT_COUNT],
+        }
+    }
+}
+
+impl Rotations {
+    /// Joint `j`'s rotation at `pose`, made unless stored for the same angles.
+    #[inline]
+    fn get(&mut self, j: Joint, pose: &Pose) -> &Rotation3<f64> {
+        let i = j.index();
+        let (first, n) = ANGLES[i];
+        if n == 0 {
+            // Never made: the identity the store starts with.
+            return &self.rotations[i];
+        }
+        let key = if n == 3 {
+            [
+                pose[first].to_bits(),
+                pose[first + 1].to_bits(),
+                pose[first + 2].to_bits(),
+            ]
+        } else {
+            [pose[first].to_bits(), 0, 0]
+        };
+        if self.made[i] != key {
+            self.rotations[i] = match j.dof() {
+                Dof::Root => root_rotation(pose),
+                dof => joint_rotation(dof, pose),
+            };
+            self.made[i] = key;
+        }
+        &self.rotations[i]
     }
 }
 
@@ -570,6 +642,30 @@ mod tests {
             assert_eq!(here.tips, full.tips, "{}", g.name());
             let kept = moved.iter().filter(|m| !**m).count();
             assert_eq!(kept == 0, g == crate::body::params::Group::Global);
+        }
+    }
+
+    #[test]
+    fn a_posed_body_reused_across_poses_and_shapes_matches_a_fresh_one() {
+        // The stored rotations must follow every angle, and none may carry a
+        // shape: one Posed, posed in turn with two skeletons at poses that differ
+        // in one angle at a time, against a fresh Posed each time.
+        let (sk, rest) = standard_rest();
+        let mut shape = params::STANDARD_SHAPE;
+        for (k, v) in shape.iter_mut().enumerate() {
+            *v *= 1.0 + 0.03 * k as f64;
+        }
+        let other = Skeleton::new(&shape);
+        let mut reused = Posed::default();
+        let mut pose = rest;
+        for k in 0..pose.len() {
+            pose[k] += 7.0 + k as f64;
+            for s in [&sk, &other] {
+                s.pose(&pose, &mut reused);
+                let fresh = s.posed(&pose);
+                assert_eq!(reused.joints, fresh.joints, "parameter {k}");
+                assert_eq!(reused.tips, fresh.tips, "parameter {k}");
+            }
         }
     }
 
