@@ -275,11 +275,16 @@ struct Prepared {
     y1: i64,
 }
 
+/// A part's A⁻¹ (the diagonal of its canonical scaling's inverse): 1 / each radius.
+fn inverse_radii(part: &Part) -> Vector3<f64> {
+    Vector3::new(1.0 / part.radii.x, 1.0 / part.radii.y, 1.0 / part.radii.z)
+}
+
 impl Prepared {
     /// None when the part is off-screen or crosses the near plane.
     fn new(part: &Part, joint_to_camera: &IsometryMatrix3<f64>, cam: &Camera) -> Option<Prepared> {
         let rot = joint_to_camera.rotation.matrix();
-        let inv_a = Vector3::new(1.0 / part.radii.x, 1.0 / part.radii.y, 1.0 / part.radii.z);
+        let inv_a = inverse_radii(part);
         // Conservative screen bounds from the corners of the canonical bounding box.
         let (ylo, yhi) = match part.kind {
             Kind::Ellipsoid => (-1.0, 1.0),
@@ -977,7 +982,7 @@ pub fn render_fragments(body: &Body, posed: &Posed, cam: &Camera, out: &mut Frag
         };
         // Canonical normal → camera normal (unnormalised): R · A⁻¹ (made here, not
         // in [`Prepared::new`], whose other callers need no normals).
-        let inv_a = Vector3::new(1.0 / part.radii.x, 1.0 / part.radii.y, 1.0 / part.radii.z);
+        let inv_a = inverse_radii(part);
         let normal = to_cam.rotation.matrix() * Matrix3::from_diagonal(&inv_a);
         for y in prep.y0..=prep.y1 {
             let r = prep.row_base(y as f64 + 0.5);
