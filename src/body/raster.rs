@@ -15,6 +15,7 @@
 //! the body behind the camera has nothing sensible to show).
 
 use image::GrayImage;
+use multiversion::multiversion;
 use nalgebra::{IsometryMatrix3, Matrix3, Point3, Vector3};
 
 use super::camera::Camera;
@@ -383,6 +384,29 @@ impl Prepared {
         roots_by_centre(a, b, c, self.inv_2a).map(Some)
     }
 
+    /// The hull quadratic's terms ([`roots_by_centre`]) on every row of the box,
+    /// into `out` (row y0 + k at k); only for a proper quadratic (`a` < 0). The
+    /// rows are done together in a loop with no branches, which the compiler can
+    /// run several rows at a time (with each row's branches in between, each
+    /// square root waited on the last).
+    #[inline(always)]
+    fn hull_rows(&self, out: &mut HullRows) {
+        let n = (self.y1 - self.y0 + 1) as usize;
+        let (a, inv_2a) = (self.a, self.inv_2a);
+        let rows = out.disc[..n]
+            .iter_mut()
+            .zip(&mut out.centre[..n])
+            .zip(&mut out.half[..n]);
+        for (k, ((disc, centre), half)) in rows.enumerate() {
+            // The same value as row_interval's `y as f64 + 0.5`: rows fit an i32.
+            let r = self.row_base((self.y0 as i32 + k as i32) as f64 + 0.5);
+            let (_, b, c) = self.row_quadratic(&r);
+            *disc = b * b - 4.0 * a * c;
+            *centre = -b * inv_2a;
+            *half = (disc.sqrt() * inv_2a).abs();
+        }
+    }
+
     /// The inclusive pixel span of a row where the quadratic's test passes, clipped
     /// to the bounding box.
     fn row_span(&self, r: &Vector3<f64>) -> Option<(i64, i64)> {
@@ -417,15 +441,27 @@ impl Prepared {
     #[inline(always)]
     fn row_interval(&self, y: i64, width: f64) -> [f32; 2] {
         let r = self.row_base(y as f64 + 0.5);
-        let (lo, hi) = match self.row_roots(&r) {
+        self.interval_of(&r, self.row_roots(&r), width)
+    }
+
+    /// [`Prepared::row_interval`] along the row `r` whose hull roots
+    /// ([`Prepared::row_roots`]) are `roots`.
+    #[inline(always)]
+    fn interval_of(
+        &self,
+        r: &Vector3<f64>,
+        roots: Option<Option<(f64, f64)>>,
+        width: f64,
+    ) -> [f32; 2] {
+        let (lo, hi) = match roots {
             None => return [0.0; 2],
             Some(Some((lo, hi))) if self.kind == Kind::Ellipsoid => (lo, hi),
-            Some(Some((lo, hi))) => match self.cylinder_row(&r, lo, hi) {
+            Some(Some((lo, hi))) => match self.cylinder_row(r, lo, hi) {
                 Some(Some(iv)) => iv,
-                Some(None) => return self.bisected_row(&r, Some((lo, hi)), width),
+                Some(None) => return self.bisected_row(r, Some((lo, hi)), width),
                 None => return [0.0; 2],
             },
-            Some(None) => return self.bisected_row(&r, None, width),
+            Some(None) => return self.bisected_row(r, None, width),
         };
         stored_span(lo, hi, width)
     }
@@ -435,6 +471,7 @@ impl Prepared {
     /// cylinder is the convex hull of its two caps, so each end of its span is
     /// either the hull's (where the ray grazing the side touches it at a height
     /// between the caps) or a cap's rim (the end of that cap's span).
+    #[inline(always)]
     fn cylinder_row(&self, r: &Vector3<f64>, lo: f64, hi: f64) -> Option<Option<(f64, f64)>> {
         let o = &self.o;
         // Whether the ray at u, tangent to the side, touches it between the caps.
@@ -811,6 +848,44 @@ pub struct PartSpans {
     rows: [Option<(u32, u32)>; PART_COUNT],
     /// `part × height + y` → `[lo, hi]`; `lo ≥ hi` where the row misses the part.
     spans: Vec<[f32; 2]>,
+    /// Scratch: one part's hull roots, row by row.
+    hull: HullRows,
+}
+
+/// A part's hull quadratic on each row of its box ([`Prepared::hull_rows`]): the
+/// discriminant, the roots' centre and their half distance, as
+/// [`roots_by_centre`] makes them.
+#[derive(Clone, Debug)]
+struct HullRows {
+    disc: Vec<f64>,
+    centre: Vec<f64>,
+    half: Vec<f64>,
+}
+
+impl HullRows {
+    fn new(height: u32) -> HullRows {
+        let h = height as usize;
+        HullRows {
+            disc: vec![0.0; h],
+            centre: vec![0.0; h],
+            half: vec![0.0; h],
+        }
+    }
+
+    /// Row k's roots, as [`roots_by_centre`] gives them; `quadratic` is the
+    /// row's (a, b, c), asked for only where the centre is too far out.
+    #[inline(always)]
+    fn roots(&self, k: usize, quadratic: impl FnOnce() -> (f64, f64, f64)) -> Option<(f64, f64)> {
+        let (disc, centre, half) = (self.disc[k], self.centre[k], self.half[k]);
+        if disc < 0.0 {
+            return None;
+        }
+        if centre.abs() > 1e7 {
+            let (a, b, c) = quadratic();
+            return quadratic_roots(a, b, c);
+        }
+        Some((centre - half, centre + half))
+    }
 }
 
 impl PartSpans {
@@ -820,6 +895,7 @@ impl PartSpans {
             height,
             rows: [None; PART_COUNT],
             spans: vec![[0.0; 2]; PART_COUNT * height as usize],
+            hull: HullRows::new(height),
         }
     }
 
@@ -839,8 +915,12 @@ impl PartSpans {
 /// Spans the parts of `body` whose indices `parts` lists into `out` (the other
 /// parts' spans are kept). Allocation-free.
 ///
+/// Compiled twice, and run with AVX2 where the processor has it (the rows' roots
+/// four at a time; the same arithmetic, so the same spans to the bit).
+///
 /// # Panics
 /// When `out` is not the camera's size or an index is not a part's.
+#[multiversion(targets("x86_64+avx2"))]
 pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out: &mut PartSpans) {
     assert!(
         out.width == cam.width && out.height == cam.height,
@@ -854,8 +934,20 @@ pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out
         let Some(prep) = Prepared::new(part, &to_cam, cam) else {
             continue;
         };
-        for y in prep.y0..=prep.y1 {
-            out.spans[pi * h + y as usize] = prep.row_interval(y, cam.width as f64);
+        let width = cam.width as f64;
+        let spans = &mut out.spans[pi * h..(pi + 1) * h];
+        if prep.a < -1e-18 {
+            // A proper quadratic (row_roots): each row's roots computed ahead.
+            prep.hull_rows(&mut out.hull);
+            for (k, y) in (prep.y0..=prep.y1).enumerate() {
+                let r = prep.row_base(y as f64 + 0.5);
+                let roots = out.hull.roots(k, || prep.row_quadratic(&r));
+                spans[y as usize] = prep.interval_of(&r, roots.map(Some), width);
+            }
+        } else {
+            for y in prep.y0..=prep.y1 {
+                spans[y as usize] = prep.row_interval(y, width);
+            }
         }
         out.rows[pi] = Some((prep.y0 as u32, prep.y1 as u32));
     }
@@ -1230,6 +1322,43 @@ mod tests {
             let (body, posed, cam) = any_pose(&unit, depth, heading);
             let (_, differs) = render_against_ray_tests(&body, &posed, &cam);
             proptest::prop_assert_eq!(differs, None, "pixel (x, y) where the fast render differs");
+        }
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(100))]
+
+        /// The span table, its rows' roots computed together (four at a time where
+        /// the processor has AVX2), holds to the bit what each row's interval on its
+        /// own gives.
+        #[test]
+        fn span_table_is_each_rows_own_interval(
+            unit in proptest::collection::vec(0.0f64..1.0, params::MOTION_COUNT),
+            depth in 150.0f64..600.0,
+            heading in -180.0f64..180.0,
+        ) {
+            let (body, posed, cam) = any_pose(&unit, depth, heading);
+            let mut spans = PartSpans::new(cam.width, cam.height);
+            let all: Vec<usize> = (0..PART_COUNT).collect();
+            span_parts(&body, &posed, &cam, &all, &mut spans);
+            for (i, part) in body.parts.iter().enumerate() {
+                let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+                let prep = Prepared::new(part, &to_cam, &cam);
+                proptest::prop_assert_eq!(
+                    spans.rows(i),
+                    prep.as_ref().map(|p| (p.y0 as u32, p.y1 as u32))
+                );
+                let Some(p) = prep else { continue };
+                for y in p.y0..=p.y1 {
+                    let own = p.row_interval(y, cam.width as f64);
+                    let held = spans.spans[i * cam.height as usize + y as usize];
+                    proptest::prop_assert_eq!(
+                        own.map(f32::to_bits),
+                        held.map(f32::to_bits),
+                        "part {} row {}", i, y
+                    );
+                }
+            }
         }
     }
 
