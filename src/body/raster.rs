@@ -409,6 +409,7 @@ impl Prepared {
 
     /// The inclusive pixel span of a row where the quadratic's test passes, clipped
     /// to the bounding box.
+    #[inline(always)]
     fn row_span(&self, r: &Vector3<f64>) -> Option<(i64, i64)> {
         // Degenerate (the camera sits inside a cylinder's infinite hull, or the
         // conic is not an ellipse): test every pixel of the box.
@@ -790,8 +791,12 @@ fn cylinder_interval(o: &Vector3<f64>, d: &Vector3<f64>) -> Option<(f64, f64)> {
 /// Draws the silhouette of `body` in pose `posed` seen by `cam` into `mask` (which is
 /// cleared first). Allocation-free.
 ///
+/// Compiled twice, like [`span_parts`], and run with AVX2 where the processor has
+/// it; the same pixels either way.
+///
 /// # Panics
 /// When `mask` is not the camera's size.
+#[multiversion(targets("x86_64+avx2"))]
 pub fn render_mask(body: &Body, posed: &Posed, cam: &Camera, mask: &mut Mask) {
     assert!(
         mask.width == cam.width && mask.height == cam.height,
@@ -811,8 +816,12 @@ pub fn render_mask(body: &Body, posed: &Posed, cam: &Camera, mask: &mut Mask) {
 /// part is on screen). The objective re-renders only the parts a search moves.
 /// Allocation-free.
 ///
+/// Compiled twice, like [`span_parts`], and run with AVX2 where the processor has
+/// it; the same pixels either way.
+///
 /// # Panics
 /// When `mask` is not the camera's size or an index is not a part's.
+#[multiversion(targets("x86_64+avx2"))]
 pub fn render_parts(
     body: &Body,
     posed: &Posed,
@@ -953,6 +962,7 @@ pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out
     }
 }
 
+#[inline(always)]
 fn draw_part(prep: &Prepared, mask: &mut Mask) {
     for y in prep.y0..=prep.y1 {
         let r = prep.row_base(y as f64 + 0.5);
