@@ -1335,6 +1335,26 @@ mod tests {
         }
     }
 
+    /// Every part's row spans at the pose, and each part's projection set up.
+    fn spans_and_preps(
+        body: &Body,
+        posed: &Posed,
+        cam: &Camera,
+    ) -> (PartSpans, Vec<Option<Prepared>>) {
+        let mut spans = PartSpans::new(cam.width, cam.height);
+        let all: Vec<usize> = (0..PART_COUNT).collect();
+        span_parts(body, posed, cam, &all, &mut spans);
+        let preps = body
+            .parts
+            .iter()
+            .map(|part| {
+                let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
+                Prepared::new(part, &to_cam, cam)
+            })
+            .collect();
+        (spans, preps)
+    }
+
     proptest::proptest! {
         #![proptest_config(proptest::prelude::ProptestConfig::with_cases(100))]
 
@@ -1348,12 +1368,8 @@ mod tests {
             heading in -180.0f64..180.0,
         ) {
             let (body, posed, cam) = any_pose(&unit, depth, heading);
-            let mut spans = PartSpans::new(cam.width, cam.height);
-            let all: Vec<usize> = (0..PART_COUNT).collect();
-            span_parts(&body, &posed, &cam, &all, &mut spans);
-            for (i, part) in body.parts.iter().enumerate() {
-                let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
-                let prep = Prepared::new(part, &to_cam, &cam);
+            let (spans, preps) = spans_and_preps(&body, &posed, &cam);
+            for (i, prep) in preps.iter().enumerate() {
                 proptest::prop_assert_eq!(
                     spans.rows(i),
                     prep.as_ref().map(|p| (p.y0 as u32, p.y1 as u32))
@@ -1386,13 +1402,9 @@ mod tests {
             heading in -180.0f64..180.0,
         ) {
             let (body, posed, cam) = any_pose(&unit, depth, heading);
-            let mut spans = PartSpans::new(cam.width, cam.height);
-            let all: Vec<usize> = (0..PART_COUNT).collect();
-            span_parts(&body, &posed, &cam, &all, &mut spans);
+            let (spans, preps) = spans_and_preps(&body, &posed, &cam);
             let k = 64;
-            for (i, part) in body.parts.iter().enumerate() {
-                let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
-                let prep = Prepared::new(part, &to_cam, &cam);
+            for (i, (part, prep)) in body.parts.iter().zip(&preps).enumerate() {
                 for y in 0..cam.height {
                     // The samples along the row's centre line whose rays meet the part.
                     let hit: Vec<f64> = match &prep {
