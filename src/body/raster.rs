@@ -376,16 +376,25 @@ impl Prepared {
     /// Where along the row `r` the quadratic's test passes: None when nowhere,
     /// `Some(None)` when the quadratic is degenerate (every pixel must be tested).
     fn row_roots(&self, r: &Vector3<f64>) -> Option<Option<(f64, f64)>> {
-        let (a, b, c) = self.row_quadratic(r);
-        if a >= -1e-18 {
+        if !self.proper() {
             return Some(None);
         }
+        let (a, b, c) = self.row_quadratic(r);
         // a < 0, so the test passes between the roots.
         roots_by_centre(a, b, c, self.inv_2a).map(Some)
     }
 
+    /// Whether the rows' hull quadratic is a proper one (its leading coefficient
+    /// `a` not ≥ −1e-18; a NaN counts, as it always has); else every pixel of the
+    /// box must be tested.
+    #[allow(clippy::neg_cmp_op_on_partial_ord)]
+    #[inline(always)]
+    fn proper(&self) -> bool {
+        !(self.a >= -1e-18)
+    }
+
     /// The hull quadratic's terms ([`roots_by_centre`]) on every row of the box,
-    /// into `out` (row y0 + k at k); only for a proper quadratic (`a` < 0). The
+    /// into `out` (row y0 + k at k); only for a [`Prepared::proper`] quadratic. The
     /// rows are done together in a loop with no branches, which the compiler can
     /// run several rows at a time (with each row's branches in between, each
     /// square root waited on the last).
@@ -699,14 +708,31 @@ impl Cap {
 #[inline]
 fn roots_by_centre(a: f64, b: f64, c: f64, inv_2a: f64) -> Option<(f64, f64)> {
     let disc = b * b - 4.0 * a * c;
+    centred_roots(
+        disc,
+        -b * inv_2a,
+        || (disc.sqrt() * inv_2a).abs(),
+        || quadratic_roots(a, b, c),
+    )
+}
+
+/// [`roots_by_centre`]'s roots from the discriminant, the centre and the
+/// half-width (`half`, asked for only where it is used); `far` gives them where
+/// the centre is too far off.
+#[inline(always)]
+fn centred_roots(
+    disc: f64,
+    centre: f64,
+    half: impl FnOnce() -> f64,
+    far: impl FnOnce() -> Option<(f64, f64)>,
+) -> Option<(f64, f64)> {
     if disc < 0.0 {
         return None;
     }
-    let centre = -b * inv_2a;
     if centre.abs() > 1e7 {
-        return quadratic_roots(a, b, c);
+        return far();
     }
-    let half = (disc.sqrt() * inv_2a).abs();
+    let half = half();
     Some((centre - half, centre + half))
 }
 
@@ -885,15 +911,15 @@ impl HullRows {
     /// row's (a, b, c), asked for only where the centre is too far out.
     #[inline(always)]
     fn roots(&self, k: usize, quadratic: impl FnOnce() -> (f64, f64, f64)) -> Option<(f64, f64)> {
-        let (disc, centre, half) = (self.disc[k], self.centre[k], self.half[k]);
-        if disc < 0.0 {
-            return None;
-        }
-        if centre.abs() > 1e7 {
-            let (a, b, c) = quadratic();
-            return quadratic_roots(a, b, c);
-        }
-        Some((centre - half, centre + half))
+        centred_roots(
+            self.disc[k],
+            self.centre[k],
+            || self.half[k],
+            || {
+                let (a, b, c) = quadratic();
+                quadratic_roots(a, b, c)
+            },
+        )
     }
 }
 
@@ -935,7 +961,7 @@ pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out
         out.width == cam.width && out.height == cam.height,
         "span table size differs from the camera's"
     );
-    let h = out.height as usize;
+    let (h, width) = (out.height as usize, cam.width as f64);
     for &pi in parts {
         let part = &body.parts[pi];
         let to_cam = cam.world_to_camera * posed.joints[part.joint.index()];
@@ -943,10 +969,9 @@ pub fn span_parts(body: &Body, posed: &Posed, cam: &Camera, parts: &[usize], out
         let Some(prep) = Prepared::new(part, &to_cam, cam) else {
             continue;
         };
-        let width = cam.width as f64;
         let spans = &mut out.spans[pi * h..(pi + 1) * h];
-        if prep.a < -1e-18 {
-            // A proper quadratic (row_roots): each row's roots computed ahead.
+        if prep.proper() {
+            // Each row's roots computed ahead (row_roots).
             prep.hull_rows(&mut out.hull);
             for (k, y) in (prep.y0..=prep.y1).enumerate() {
                 let r = prep.row_base(y as f64 + 0.5);
